@@ -1,0 +1,160 @@
+//! Loading the face, posing it from the command line, rendering it, and the gallery of
+//! expressions and single muscles (`facelab render`, `facelab gallery`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+use crate::io::expressions::{default_expressions_path, read_expressions};
+use crate::io::mesh::{default_mesh_path, read_obj};
+use crate::report::render::{render, Camera, RenderOptions};
+use crate::report::save_png;
+use crate::sim::controls::{control_names, JAW_ROTATION};
+use crate::sim::expression::{Expression, ExpressionWeights};
+use crate::sim::{solve_from_rest, Activations, FaceModel, FaceParams, SolveParams, State, Workspace};
+
+/// Where the face comes from.
+#[derive(Clone, Debug, Default)]
+pub struct FaceSource {
+    /// OBJ mesh; default `assets/face/canonical_face.obj`.
+    pub mesh: Option<PathBuf>,
+    /// Expression weights; default `experiments/expressions.csv`.
+    pub expressions: Option<PathBuf>,
+    pub subdivisions: u8,
+}
+
+impl FaceSource {
+    pub fn model(&self) -> Result<FaceModel> {
+        let path = self.mesh.clone().unwrap_or_else(default_mesh_path);
+        let mesh = read_obj(&path)?;
+        let params = FaceParams {
+            subdivisions: self.subdivisions,
+            ..FaceParams::default()
+        };
+        FaceModel::new(&mesh, params).with_context(|| format!("{}: cannot build the face model", path.display()))
+    }
+
+    pub fn weights(&self) -> Result<ExpressionWeights> {
+        let path = self.expressions.clone().unwrap_or_else(default_expressions_path);
+        Ok(read_expressions(&path)?)
+    }
+}
+
+/// What to pose: an expression at a scale, then individual overrides.
+#[derive(Clone, Debug, Default)]
+pub struct PoseRequest {
+    pub expression: Option<Expression>,
+    pub scale: f64,
+    /// `name=value` pairs, applied after the expression.
+    pub activations: Vec<(String, f64)>,
+    pub jaw_rotation: Option<f64>,
+}
+
+/// Parses `name=value,name=value`.
+pub fn parse_assignments(text: &str) -> Result<Vec<(String, f64)>> {
+    text.split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|item| {
+            let (name, value) = item
+                .split_once('=')
+                .with_context(|| format!("`{item}` is not of the form name=value"))?;
+            let value: f64 = value
+                .trim()
+                .parse()
+                .with_context(|| format!("`{}` in `{item}` is not a number", value.trim()))?;
+            Ok((name.trim().to_string(), value))
+        })
+        .collect()
+}
+
+impl PoseRequest {
+    pub fn activations(&self, weights: &ExpressionWeights) -> Result<Activations> {
+        if !(0.0..=1.0).contains(&self.scale) {
+            bail!("--scale {} is outside [0, 1]", self.scale);
+        }
+        let mut a = match self.expression {
+            Some(e) => weights.activations(e, self.scale),
+            None => Activations::neutral(),
+        };
+        for (name, value) in &self.activations {
+            a.set(name, *value)?;
+        }
+        if let Some(r) = self.jaw_rotation {
+            a.set_index(JAW_ROTATION, r).context("--jaw-rotation")?;
+        }
+        Ok(a)
+    }
+}
+
+/// Solves `a` from rest, with the error saying which activations failed.
+pub fn pose(model: &FaceModel, a: &Activations, ws: &mut Workspace) -> Result<State> {
+    let (state, _) = solve_from_rest(model, a, ws, &SolveParams::default()).with_context(|| {
+        let active: Vec<String> = control_names()
+            .iter()
+            .zip(a.values())
+            .filter(|(name, &v)| v != if name.as_str() == "jaw_slide" || name.as_str() == "jaw_twist" { 0.5 } else { 0.0 })
+            .map(|(name, v)| format!("{name}={v}"))
+            .collect();
+        format!("solving the face for {}", active.join(","))
+    })?;
+    Ok(state)
+}
+
+/// `facelab render`.
+pub fn render_to(source: &FaceSource, request: &PoseRequest, options: &RenderOptions, out: &Path) -> Result<()> {
+    let model = source.model()?;
+    let weights = source.weights()?;
+    let a = request.activations(&weights)?;
+    let mut ws = Workspace::new(&model);
+    let state = pose(&model, &a, &mut ws)?;
+    save_png(&render(&model, &state, options), out)
+}
+
+/// `facelab gallery`: the rest face, each expression at s = 1 (frontal and three-quarter),
+/// each muscle and jaw input alone at 1.0, and a muscle overlay.
+pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
+    let model = source.model()?;
+    let weights = source.weights()?;
+    let mut ws = Workspace::new(&model);
+    let mut written = Vec::new();
+    let mut write = |state: &State, options: &RenderOptions, path: PathBuf| -> Result<()> {
+        save_png(&render(&model, state, options), &path)?;
+        written.push(path);
+        Ok(())
+    };
+    let frontal = RenderOptions::default();
+    let side = RenderOptions {
+        camera: Camera::three_quarter(),
+        ..frontal
+    };
+    let rest = model.rest_state();
+    write(&rest, &frontal, out.join("rest.png"))?;
+    write(&rest, &side, out.join("rest_three_quarter.png"))?;
+    for e in Expression::ALL {
+        let state = pose(&model, &weights.activations(e, 1.0), &mut ws)?;
+        write(&state, &frontal, out.join(format!("{e}.png")))?;
+        write(&state, &side, out.join(format!("{e}_three_quarter.png")))?;
+        if e == Expression::Joy {
+            let overlay = RenderOptions {
+                muscle_overlay: true,
+                ..frontal
+            };
+            write(&state, &overlay, out.join("joy_muscles.png"))?;
+        }
+    }
+    let small = RenderOptions {
+        width: 240,
+        height: 280,
+        ..frontal
+    };
+    for (index, name) in control_names().iter().enumerate() {
+        if name == "auxiliary" {
+            continue;
+        }
+        let mut a = Activations::neutral();
+        a.set_index(index, 1.0)?;
+        let state = pose(&model, &a, &mut ws)?;
+        write(&state, &small, out.join("single").join(format!("{name}.png")))?;
+    }
+    Ok(written)
+}

@@ -1,0 +1,4 @@
+//! The harness: commands that put the simulator, the observer and the reports together.
+
+pub mod bench;
+pub mod face;

@@ -1,0 +1,167 @@
+//! The `facelab` command line: parse, call the library, print the error chain, exit non-zero
+//! on failure.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+use facelab::experiments::bench::bench_solve;
+use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
+use facelab::report::render::{Camera, RenderOptions};
+
+#[derive(Parser)]
+#[command(name = "facelab", version, about = "Biomechanical facial expression transfer, reproduced")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Args, Clone)]
+struct FaceArgs {
+    /// Base mesh (OBJ, cm) [default: assets/face/canonical_face.obj]
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Expression weight table [default: experiments/expressions.csv]
+    #[arg(long)]
+    expressions: Option<PathBuf>,
+    /// Loop subdivision levels (0, 1 or 2)
+    #[arg(long, default_value_t = 0)]
+    subdivisions: u8,
+}
+
+impl FaceArgs {
+    fn source(&self) -> FaceSource {
+        FaceSource {
+            mesh: self.mesh.clone(),
+            expressions: self.expressions.clone(),
+            subdivisions: self.subdivisions,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum View {
+    Frontal,
+    ThreeQuarter,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render the face for an expression and/or explicit activations.
+    Render {
+        #[command(flatten)]
+        face: FaceArgs,
+        /// joy, sadness, anger, fear, disgust or surprise
+        #[arg(long)]
+        expression: Option<String>,
+        /// Expression scale s in [0, 1] (a = w_e * s)
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        /// Activations, e.g. zygomaticus_major_left=0.7,frontalis_medial_right=0.3
+        #[arg(long)]
+        activation: Option<String>,
+        /// Jaw rotation in [0, 1]
+        #[arg(long)]
+        jaw_rotation: Option<f64>,
+        /// Draw the muscles over the face, coloured by activation
+        #[arg(long)]
+        overlay: bool,
+        #[arg(long, value_enum, default_value_t = View::Frontal)]
+        view: View,
+        #[arg(long, default_value_t = 480)]
+        width: u32,
+        #[arg(long, default_value_t = 560)]
+        height: u32,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Render the rest face, each expression at s = 1 and each muscle alone.
+    Gallery {
+        #[command(flatten)]
+        face: FaceArgs,
+        #[arg(long, default_value = "figures/face")]
+        out: PathBuf,
+    },
+    /// Benchmarks (run with --release).
+    Bench {
+        #[command(subcommand)]
+        what: Bench,
+    },
+}
+
+#[derive(Subcommand)]
+enum Bench {
+    /// Nonlinear and linear-basis solve times and the basis' landmark error.
+    Solve {
+        #[command(flatten)]
+        face: FaceArgs,
+        /// Random samples at subdivision 0 (a fifth of them at 1)
+        #[arg(long, default_value_t = 60)]
+        samples: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Subdivision levels to measure
+        #[arg(long, value_delimiter = ',', default_value = "0,1")]
+        levels: Vec<u8>,
+    },
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Render {
+            face,
+            expression,
+            scale,
+            activation,
+            jaw_rotation,
+            overlay,
+            view,
+            width,
+            height,
+            out,
+        } => {
+            let request = PoseRequest {
+                expression: expression.map(|e| e.parse()).transpose()?,
+                scale,
+                activations: activation.map(|a| parse_assignments(&a)).transpose()?.unwrap_or_default(),
+                jaw_rotation,
+            };
+            let options = RenderOptions {
+                width,
+                height,
+                camera: match view {
+                    View::Frontal => Camera::frontal(),
+                    View::ThreeQuarter => Camera::three_quarter(),
+                },
+                muscle_overlay: overlay,
+            };
+            render_to(&face.source(), &request, &options, &out)?;
+            println!("wrote {}", out.display());
+        }
+        Command::Gallery { face, out } => {
+            let written = gallery(&face.source(), &out)?;
+            println!("wrote {} images to {}", written.len(), out.display());
+        }
+        Command::Bench { what } => match what {
+            Bench::Solve {
+                face,
+                samples,
+                seed,
+                levels,
+            } => bench_solve(&face.source(), &levels, samples, seed, &mut std::io::stdout().lock())?,
+        },
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,146 @@
+//! Small fixed-size vector and rotation algebra for the simulator.
+//!
+//! Positions are `[f64; 3]` in metres. Nothing here allocates; nothing here knows about faces.
+
+/// A point or direction in metres.
+pub type V3 = [f64; 3];
+
+#[inline]
+pub fn add(a: V3, b: V3) -> V3 {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+#[inline]
+pub fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline]
+pub fn scale(a: V3, s: f64) -> V3 {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+#[inline]
+pub fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+#[inline]
+pub fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[inline]
+pub fn norm(a: V3) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// `a / |a|`, or zero for a zero vector.
+#[inline]
+pub fn normalize(a: V3) -> V3 {
+    let n = norm(a);
+    if n > 0.0 {
+        scale(a, 1.0 / n)
+    } else {
+        [0.0; 3]
+    }
+}
+
+#[inline]
+pub fn lerp(a: V3, b: V3, t: f64) -> V3 {
+    add(a, scale(sub(b, a), t))
+}
+
+/// Signed volume of the tetrahedron (a, b, c, d): positive when (b-a, c-a, d-a) is right-handed.
+#[inline]
+pub fn tet_volume(a: V3, b: V3, c: V3, d: V3) -> f64 {
+    dot(cross(sub(b, a), sub(c, a)), sub(d, a)) / 6.0
+}
+
+/// A 3x3 rotation matrix, row-major.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rot3(pub [[f64; 3]; 3]);
+
+impl Rot3 {
+    pub const IDENTITY: Rot3 = Rot3([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+
+    /// Rotation by `angle` radians about the unit `axis` (Rodrigues' formula).
+    pub fn about_axis(axis: V3, angle: f64) -> Rot3 {
+        let [x, y, z] = normalize(axis);
+        let (s, c) = angle.sin_cos();
+        let t = 1.0 - c;
+        Rot3([
+            [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+            [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+            [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
+        ])
+    }
+
+    #[inline]
+    pub fn apply(&self, v: V3) -> V3 {
+        let m = &self.0;
+        [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
+    }
+
+    pub fn mul(&self, other: &Rot3) -> Rot3 {
+        let mut out = [[0.0; 3]; 3];
+        for (i, row) in out.iter_mut().enumerate() {
+            for (j, cell) in row.iter_mut().enumerate() {
+                *cell = (0..3).map(|k| self.0[i][k] * other.0[k][j]).sum();
+            }
+        }
+        Rot3(out)
+    }
+}
+
+/// A rigid motion x -> R (x - pivot) + pivot + t.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rigid {
+    pub rotation: Rot3,
+    pub pivot: V3,
+    pub translation: V3,
+}
+
+impl Rigid {
+    pub const IDENTITY: Rigid = Rigid {
+        rotation: Rot3::IDENTITY,
+        pivot: [0.0; 3],
+        translation: [0.0; 3],
+    };
+
+    /// The moved point, computed as `x + displacement(x)` so the identity motion returns `x`
+    /// bit for bit.
+    #[inline]
+    pub fn apply(&self, x: V3) -> V3 {
+        add(x, self.displacement(x))
+    }
+
+    /// `R (x - pivot) - (x - pivot) + t`: exactly zero for the identity.
+    #[inline]
+    pub fn displacement(&self, x: V3) -> V3 {
+        let r = sub(x, self.pivot);
+        add(sub(self.rotation.apply(r), r), self.translation)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_about_z_turns_x_into_y() {
+        let r = Rot3::about_axis([0.0, 0.0, 1.0], std::f64::consts::FRAC_PI_2);
+        let v = r.apply([1.0, 0.0, 0.0]);
+        assert!((v[0]).abs() < 1e-15 && (v[1] - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn unit_tet_has_volume_one_sixth() {
+        let v = tet_volume([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+        assert!((v - 1.0 / 6.0).abs() < 1e-15);
+    }
+}

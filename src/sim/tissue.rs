@@ -1,0 +1,377 @@
+//! Layered facial soft tissue after Lee, Terzopoulos & Waters 1995 (LTW95): the surface mesh
+//! is offset inward into four node sheets (surface, dermis, fascia, skull); each surface
+//! triangle becomes three stacked prism elements (epidermis/dermis, dermal-fatty, muscle
+//! layer) joined by in-sheet, vertical and crossing springs, with per-prism volume
+//! preservation and skull non-penetration for the fascia sheet.
+//!
+//! Units: metres, newtons, pascals. Depends only on `sim::geom` and `sim::mesh`.
+
+use super::geom::{add, norm, normalize, scale, sub, tet_volume, V3};
+use super::mesh::Mesh;
+
+/// The four node sheets, outermost first. Node index = `sheet * vertex_count + vertex`.
+pub const SHEETS: usize = 4;
+pub const SURFACE: usize = 0;
+pub const DERMIS: usize = 1;
+pub const FASCIA: usize = 2;
+pub const SKULL: usize = 3;
+
+/// Material and geometry of the tissue. Defaults are LTW95-style values scaled to SI and to
+/// measured human facial tissue; each field says where its default comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TissueParams {
+    /// Epidermis + dermis thickness (m). Default 1.5 mm: facial skin is 1-2 mm thick
+    /// (LTW95 Sec. 3 uses a thin epidermal layer over a thicker dermal-fatty layer).
+    pub epidermis_thickness: f64,
+    /// Dermal-fatty (subcutaneous) layer thickness (m). Default 4 mm, mid-face soft tissue
+    /// depth minus skin and muscle (cadaver and ultrasound depths are 5-15 mm in total).
+    pub dermal_fatty_thickness: f64,
+    /// Muscle layer thickness, fascia to skull (m). Default 3 mm (mimetic muscles are 1-4 mm).
+    pub muscle_layer_thickness: f64,
+    /// Young's modulus of the epidermis/dermis slab (Pa). Default 150 kPa: in-vivo skin
+    /// at small strain is 50-200 kPa (suction and indentation tests).
+    pub epidermis_modulus: f64,
+    /// Strain beyond which epidermal in-sheet springs stiffen (LTW95's biphasic spring).
+    /// Default 0.15, where skin's collagen straightens (the toe of its stress-strain curve).
+    pub epidermis_stiffening_strain: f64,
+    /// Stiffness ratio of the epidermal springs past the stiffening strain. Default 8 (LTW95
+    /// use a stiffer second slope; skin's linear region is 5-20x its toe region).
+    pub epidermis_stiffening_factor: f64,
+    /// Young's modulus of the dermal-fatty slab (Pa). Default 20 kPa (subcutaneous fat 2-25 kPa).
+    pub dermal_fatty_modulus: f64,
+    /// Young's modulus of the muscle layer (Pa). Default 8 kPa: loose areolar tissue under the
+    /// fascia lets it slide over the skull (LTW95 make these springs the weakest).
+    pub muscle_layer_modulus: f64,
+    /// Crossing-spring stiffness as a fraction of the in-sheet stiffness of the same slab
+    /// (shear resistance). Default 0.5.
+    pub crossing_fraction: f64,
+    /// Volume-preservation modulus (Pa): energy kappa V0 (0.5 (J - 1)^2 + 0.2 (J - 1 - ln J)),
+    /// J = V / V0, per prism (LTW95's volume constraint as a penalty, with a log barrier
+    /// against inversion). Default 100 kPa, above the shear moduli: tissue is
+    /// nearly incompressible but the penalty must not dominate the springs numerically.
+    pub volume_modulus: f64,
+    /// Skull contact stiffness per fascia node (N/m). Default 5000 N/m, ~40x the muscle-layer
+    /// vertical springs, so penetration stays a small fraction of the layer.
+    pub skull_contact_stiffness: f64,
+    /// Closest approach of the fascia to the skull, as a fraction of the muscle layer
+    /// thickness. Default 0.25.
+    pub skull_clearance_fraction: f64,
+    /// Smoothing passes over the vertex normals before offsetting (each averages a normal with
+    /// its neighbours'). Default 8: raw normals fold the inner sheets at the lips.
+    pub normal_smoothing_passes: usize,
+}
+
+impl Default for TissueParams {
+    fn default() -> Self {
+        TissueParams {
+            epidermis_thickness: 1.5e-3,
+            dermal_fatty_thickness: 4.0e-3,
+            muscle_layer_thickness: 3.0e-3,
+            epidermis_modulus: 60e3,
+            epidermis_stiffening_strain: 0.15,
+            epidermis_stiffening_factor: 8.0,
+            dermal_fatty_modulus: 10e3,
+            muscle_layer_modulus: 5e3,
+            crossing_fraction: 0.5,
+            volume_modulus: 50e3,
+            skull_contact_stiffness: 5000.0,
+            skull_clearance_fraction: 0.25,
+            normal_smoothing_passes: 8,
+        }
+    }
+}
+
+/// A uniaxial spring (LTW95 eq. 1; paper eq. 5): force `k (l - rest)` along the spring,
+/// stiffening to `k * factor` past `rest * (1 + stiffen_strain)` when `biphasic`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spring {
+    pub nodes: [usize; 2],
+    pub rest: f64,
+    pub k: f64,
+    pub biphasic: bool,
+}
+
+/// A prism element: top triangle (outer sheet) then bottom triangle (inner sheet), split into
+/// three tetrahedra for its volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prism {
+    pub nodes: [usize; 6],
+    pub rest_volume: f64,
+}
+
+/// The tetrahedra of a prism, as indices into its six nodes. Their signed volumes are all
+/// positive for a valid prism whose top triangle is counter-clockwise seen from outside.
+pub const PRISM_TETS: [[usize; 4]; 3] = [[3, 4, 5, 0], [4, 5, 0, 1], [5, 0, 1, 2]];
+
+/// Signed volume of a prism from its six node positions.
+pub fn prism_volume(p: &[V3; 6]) -> f64 {
+    PRISM_TETS
+        .iter()
+        .map(|t| tet_volume(p[t[0]], p[t[1]], p[t[2]], p[t[3]]))
+        .sum()
+}
+
+/// Smallest signed tetrahedron volume of a prism: negative means the element is inverted.
+pub fn prism_min_tet_volume(p: &[V3; 6]) -> f64 {
+    PRISM_TETS
+        .iter()
+        .map(|t| tet_volume(p[t[0]], p[t[1]], p[t[2]], p[t[3]]))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The generated tissue: rest node positions for all four sheets, the inward offset
+/// directions, the elements and their springs.
+#[derive(Clone, Debug)]
+pub struct Tissue {
+    pub vertex_count: usize,
+    /// Rest positions, `SHEETS * vertex_count`.
+    pub rest: Vec<V3>,
+    /// Unit outward normal per surface vertex used to offset the sheets (smoothed).
+    pub normals: Vec<V3>,
+    /// Per-vertex thickness scale in (0, 1] after fold removal.
+    pub thickness_scale: Vec<f64>,
+    pub springs: Vec<Spring>,
+    pub prisms: Vec<Prism>,
+    /// Prisms left out: no valid rest shape, or the muscle layer under the lips (see `build`).
+    pub degenerate_prisms: usize,
+}
+
+impl Tissue {
+    /// Offsets `mesh` inward and builds the elements. Sheets are thinned where offsetting
+    /// along the (smoothed) normals would invert a prism, e.g. at the lips and the nostrils.
+    pub fn build(mesh: &Mesh, params: &TissueParams) -> Tissue {
+        let n = mesh.vertex_count();
+        let normals = smoothed_normals(mesh, params.normal_smoothing_passes);
+        let depths = [
+            0.0,
+            params.epidermis_thickness,
+            params.epidermis_thickness + params.dermal_fatty_thickness,
+            params.epidermis_thickness + params.dermal_fatty_thickness + params.muscle_layer_thickness,
+        ];
+        let neighbours = mesh.neighbours();
+        let mut thickness_scale = vec![1.0; n];
+        let place = |scales: &[f64]| -> Vec<V3> {
+            let mut rest = Vec::with_capacity(SHEETS * n);
+            for depth in depths {
+                for v in 0..n {
+                    rest.push(sub(mesh.positions[v], scale(normals[v], depth * scales[v])));
+                }
+            }
+            rest
+        };
+        // Thin the sheets where a prism would be flat or inverted, then let the thinning spread
+        // a little so thickness varies smoothly.
+        let mut rest = place(&thickness_scale);
+        for _pass in 0..200 {
+            let mut bad = vec![false; n];
+            let mut any = false;
+            for tri in &mesh.triangles {
+                for slab in 0..SHEETS - 1 {
+                    let p = prism_nodes(tri, slab, n).map(|i| rest[i]);
+                    let expected = triangle_area(p[0], p[1], p[2])
+                        * (depths[slab + 1] - depths[slab])
+                        * tri.iter().map(|&v| thickness_scale[v]).fold(1.0, f64::min);
+                    if prism_min_tet_volume(&p) < 0.05 * expected {
+                        for &v in tri {
+                            bad[v] = true;
+                        }
+                        any = true;
+                    }
+                }
+            }
+            if !any {
+                break;
+            }
+            for v in 0..n {
+                if bad[v] {
+                    thickness_scale[v] = (thickness_scale[v] * 0.85).max(MIN_THICKNESS_SCALE);
+                }
+            }
+            let smoothed: Vec<f64> = (0..n)
+                .map(|v| {
+                    let mean = neighbours[v].iter().map(|&u| thickness_scale[u]).sum::<f64>()
+                        / neighbours[v].len().max(1) as f64;
+                    thickness_scale[v].min(mean * 1.15)
+                })
+                .collect();
+            thickness_scale = smoothed;
+            rest = place(&thickness_scale);
+        }
+
+        let areas = mesh.vertex_areas();
+        let moduli = [
+            params.epidermis_modulus,
+            params.dermal_fatty_modulus,
+            params.muscle_layer_modulus,
+        ];
+        let mut springs = Vec::new();
+        let add_spring = |springs: &mut Vec<Spring>, a: usize, b: usize, k: f64, biphasic| {
+            springs.push(Spring {
+                nodes: [a, b],
+                rest: norm(sub(rest[a], rest[b])),
+                k,
+                biphasic,
+            });
+        };
+        let edges = mesh.edges();
+        for (slab, &modulus) in moduli.iter().enumerate() {
+            let nominal = depths[slab + 1] - depths[slab];
+            // In-sheet springs: each slab lends half its membrane stiffness E*h to each of its
+            // two sheets (the skull sheet is fixed and needs none).
+            for &[a, b] in &edges {
+                let h = nominal * 0.5 * (thickness_scale[a] + thickness_scale[b]);
+                let k = 0.5 * modulus * h;
+                add_spring(&mut springs, slab * n + a, slab * n + b, k, slab == SURFACE);
+                if slab + 1 < SKULL {
+                    add_spring(&mut springs, (slab + 1) * n + a, (slab + 1) * n + b, k, false);
+                }
+                // Crossing springs resist shear of the slab.
+                let kc = params.crossing_fraction * k;
+                add_spring(&mut springs, slab * n + a, (slab + 1) * n + b, kc, false);
+                add_spring(&mut springs, slab * n + b, (slab + 1) * n + a, kc, false);
+            }
+            // Vertical springs: a column of area A and height h has stiffness E A / h.
+            for v in 0..n {
+                let h = nominal * thickness_scale[v];
+                add_spring(&mut springs, slab * n + v, (slab + 1) * n + v, modulus * areas[v] / h, false);
+            }
+        }
+        // Merge duplicate in-sheet springs (a sheet gets one from the slab above and below).
+        springs.sort_by(|x, y| x.nodes.cmp(&y.nodes));
+        let mut merged: Vec<Spring> = Vec::with_capacity(springs.len());
+        for s in springs {
+            match merged.last_mut() {
+                Some(last) if last.nodes == s.nodes => {
+                    last.k += s.k;
+                    last.biphasic |= s.biphasic;
+                }
+                _ => merged.push(s),
+            }
+        }
+
+        // At the lip commissures the surface folds back on itself (incident triangle normals
+        // ~150 degrees apart): no offset direction gives those prisms positive volume. They
+        // keep their springs but carry no volume term or inversion check.
+        let mut prisms = Vec::with_capacity(3 * mesh.triangles.len());
+        let mut degenerate_prisms = 0;
+        for tri in &mesh.triangles {
+            for slab in 0..SHEETS - 1 {
+                let nodes = prism_nodes(tri, slab, n);
+                let p = nodes.map(|i| rest[i]);
+                // The lips are not bound to bone: where the tissue had to be thinned to
+                // near nothing (the commissures and the inner lips) the muscle layer keeps its
+                // springs but no volume element, so the lips can slide over the teeth.
+                let lip = slab == SKULL - 1
+                    && tri.iter().any(|&v| thickness_scale[v] < LIP_THICKNESS_SCALE);
+                if lip || prism_min_tet_volume(&p) <= 0.0 {
+                    degenerate_prisms += 1;
+                    continue;
+                }
+                prisms.push(Prism {
+                    nodes,
+                    rest_volume: prism_volume(&p),
+                });
+            }
+        }
+        Tissue {
+            vertex_count: n,
+            rest,
+            normals,
+            thickness_scale,
+            springs: merged,
+            prisms,
+            degenerate_prisms,
+        }
+    }
+
+    /// Rest thickness of the muscle layer under vertex `v` (m).
+    pub fn muscle_layer_depth(&self, v: usize) -> f64 {
+        norm(sub(
+            self.rest[FASCIA * self.vertex_count + v],
+            self.rest[SKULL * self.vertex_count + v],
+        ))
+    }
+}
+
+/// The six nodes of the prism under triangle `tri` in slab `slab` (0 = epidermis).
+pub fn prism_nodes(tri: &[usize; 3], slab: usize, n: usize) -> [usize; 6] {
+    let top = slab * n;
+    let bottom = (slab + 1) * n;
+    [
+        top + tri[0],
+        top + tri[1],
+        top + tri[2],
+        bottom + tri[0],
+        bottom + tri[1],
+        bottom + tri[2],
+    ]
+}
+
+fn triangle_area(a: V3, b: V3, c: V3) -> f64 {
+    0.5 * norm(super::geom::cross(sub(b, a), sub(c, a)))
+}
+
+/// Vertex normals averaged with their neighbours' `passes` times, then pulled back toward the
+/// raw normal where the smoothed one would lean more than ~70 degrees from an incident
+/// triangle's normal (the inner faces of the lips), which would shear those prisms flat.
+fn smoothed_normals(mesh: &Mesh, passes: usize) -> Vec<V3> {
+    let neighbours = mesh.neighbours();
+    let raw = mesh.vertex_normals();
+    let mut normals = raw.clone();
+    for _ in 0..passes {
+        normals = (0..mesh.vertex_count())
+            .map(|v| {
+                let sum = neighbours[v]
+                    .iter()
+                    .fold(normals[v], |acc, &u| add(acc, normals[u]));
+                normalize(sum)
+            })
+            .collect();
+    }
+    let mut incident: Vec<Vec<V3>> = vec![Vec::new(); mesh.vertex_count()];
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|v| mesh.positions[v]);
+        let n = normalize(super::geom::cross(sub(b, a), sub(c, a)));
+        for &v in t {
+            incident[v].push(n);
+        }
+    }
+    for v in 0..mesh.vertex_count() {
+        let worst = |d: V3| {
+            incident[v]
+                .iter()
+                .map(|&n| (super::geom::dot(n, d), n))
+                .fold((f64::INFINITY, [0.0; 3]), |a, b| if b.0 < a.0 { b } else { a })
+        };
+        if worst(normals[v]).0 >= MIN_NORMAL_COSINE {
+            continue;
+        }
+        // Turn the direction toward its worst triangle until every incident triangle is
+        // faced as well as possible (the axis of the narrowest cone around their normals).
+        let mut d = normals[v];
+        let mut step = 0.5;
+        for _ in 0..200 {
+            let (cos, n) = worst(d);
+            if cos >= MIN_NORMAL_COSINE {
+                break;
+            }
+            let candidate = normalize(add(d, scale(n, step)));
+            if worst(candidate).0 > cos {
+                d = candidate;
+            } else {
+                step *= 0.5;
+            }
+        }
+        normals[v] = d;
+    }
+    normals
+}
+
+/// Below this thickness scale a vertex counts as lip tissue, not bound to bone.
+const LIP_THICKNESS_SCALE: f64 = 0.3;
+
+/// Thinning stops here: a flatter prism only becomes numerically degenerate.
+const MIN_THICKNESS_SCALE: f64 = 0.1;
+
+/// Smallest cosine allowed between a vertex's offset direction and its triangles' normals.
+const MIN_NORMAL_COSINE: f64 = 0.35;

@@ -1,0 +1,179 @@
+//! Physics of the face model: the checks of issue 2.
+
+use facelab::io::expressions::{default_expressions_path, read_expressions};
+use facelab::sim::expression::Expression;
+use facelab::sim::geom::{cross, dot, norm, sub, V3};
+use facelab::sim::solver::residual;
+use facelab::sim::tissue::prism_volume;
+use facelab::sim::{control_names, solve_from_rest, Activations, FaceModel, SolveParams, State, Workspace};
+
+use super::model;
+
+fn solve(a: &Activations) -> State {
+    let m = model();
+    let mut ws = Workspace::new(m);
+    solve_from_rest(m, a, &mut ws, &SolveParams::default())
+        .unwrap_or_else(|e| panic!("solve failed: {e}"))
+        .0
+}
+
+fn with(pairs: &[(&str, f64)]) -> Activations {
+    let mut a = Activations::neutral();
+    for (name, v) in pairs {
+        a.set(name, *v).unwrap();
+    }
+    a
+}
+
+fn surface(s: &State) -> &[V3] {
+    s.surface(model().vertex_count())
+}
+
+/// Prisms with non-positive volume, and surface triangles whose normal turned more than 90
+/// degrees from rest (a fold-over).
+fn defects(m: &FaceModel, s: &State) -> (usize, usize) {
+    let inverted = m
+        .tissue
+        .prisms
+        .iter()
+        .filter(|p| prism_volume(&p.nodes.map(|i| s.positions[i])) <= 0.0)
+        .count();
+    let rest = m.rest_state();
+    let normal = |x: &[V3], t: &[usize; 3]| {
+        let [a, b, c] = t.map(|v| x[v]);
+        cross(sub(b, a), sub(c, a))
+    };
+    let folded = m
+        .surface
+        .triangles
+        .iter()
+        .filter(|t| dot(normal(&s.positions, t), normal(&rest.positions, t)) <= 0.0)
+        .count();
+    (inverted, folded)
+}
+
+#[test]
+fn zero_activation_stays_at_rest() {
+    let m = model();
+    let s = solve(&Activations::neutral());
+    assert!(m.max_surface_displacement(&s) < 1e-6 * m.face_width);
+}
+
+#[test]
+fn mirrored_activations_give_a_mirrored_face() {
+    let m = model();
+    let a = with(&[
+        ("zygomaticus_major_left", 0.8),
+        ("frontalis_lateral_right", 0.6),
+        ("depressor_anguli_oris_left", 0.4),
+        ("jaw_rotation", 0.3),
+        ("jaw_twist", 0.7),
+    ]);
+    let s = solve(&a);
+    let t = solve(&a.mirrored());
+    let mut worst = 0.0f64;
+    for v in 0..m.vertex_count() {
+        let p = surface(&s)[v];
+        let q = surface(&t)[m.mirror[v]];
+        worst = worst.max(norm(sub(p, [-q[0], q[1], q[2]])));
+    }
+    // Solves converge to a relative residual of 1e-6; mirror images agree far below a micron.
+    assert!(worst < 1e-5 * m.face_width, "mirror mismatch {worst:e} m");
+}
+
+#[test]
+fn zygomaticus_major_raises_and_widens_the_lip_corner() {
+    // Vertex 291 is the subject's left mouth corner (+x).
+    let rest = model().rest_state();
+    let s = solve(&with(&[("zygomaticus_major_left", 1.0)]));
+    let (p, r) = (surface(&s)[291], surface(&rest)[291]);
+    assert!(p[1] - r[1] > 1e-3, "corner rise {:.2} mm", (p[1] - r[1]) * 1e3);
+    assert!(p[0] - r[0] > 1e-3, "corner spread {:.2} mm", (p[0] - r[0]) * 1e3);
+}
+
+#[test]
+fn frontalis_raises_the_brows() {
+    let rest = model().rest_state();
+    let a = with(&[
+        ("frontalis_medial_left", 1.0),
+        ("frontalis_medial_right", 1.0),
+        ("frontalis_intermediate_left", 1.0),
+        ("frontalis_intermediate_right", 1.0),
+        ("frontalis_lateral_left", 1.0),
+        ("frontalis_lateral_right", 1.0),
+    ]);
+    let s = solve(&a);
+    // Upper brow line, right then left: 70 63 105 66 107 / 300 293 334 296 336.
+    for v in [63, 105, 66, 107, 293, 334, 296, 336] {
+        let rise = surface(&s)[v][1] - surface(&rest)[v][1];
+        assert!(rise > 5e-4, "brow vertex {v} rose {:.2} mm", rise * 1e3);
+    }
+}
+
+#[test]
+fn jaw_rotation_opens_the_mouth() {
+    let rest = model().rest_state();
+    let s = solve(&with(&[("jaw_rotation", 1.0)]));
+    // Inner lip midpoints: 13 (upper), 14 (lower).
+    let gap = |x: &[V3]| norm(sub(x[13], x[14]));
+    let opened = gap(surface(&s)) - gap(surface(&rest));
+    assert!(opened > 0.01, "mouth opened {:.1} mm", opened * 1e3);
+}
+
+#[test]
+fn orbicularis_oculi_closes_the_eye() {
+    let rest = model().rest_state();
+    let s = solve(&with(&[
+        ("orbicularis_oculi_pretarsal_left", 1.0),
+        ("orbicularis_oculi_pretarsal_right", 1.0),
+    ]));
+    // Lid midpoints: 159/145 (right eye), 386/374 (left eye).
+    for (up, low) in [(159, 145), (386, 374)] {
+        let open = |x: &[V3]| norm(sub(x[up], x[low]));
+        let ratio = open(surface(&s)) / open(surface(&rest));
+        assert!(ratio < 0.1, "eye {up}/{low} still {:.0}% open", ratio * 100.0);
+    }
+}
+
+#[test]
+fn residual_is_below_tolerance_at_return() {
+    let m = model();
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let s = solve(&weights.activations(Expression::Joy, 0.8));
+    let mut ws = Workspace::new(m);
+    let r = residual(m, &s, &mut ws);
+    assert!(r <= SolveParams::default().tolerance, "residual {r:e}");
+}
+
+#[test]
+fn no_inverted_elements_for_any_single_muscle_or_expression() {
+    let m = model();
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let mut cases: Vec<(String, Activations)> = Vec::new();
+    for (index, name) in control_names().iter().enumerate() {
+        if name == "auxiliary" {
+            continue;
+        }
+        let mut a = Activations::neutral();
+        a.set_index(index, 1.0).unwrap();
+        cases.push((name.clone(), a));
+    }
+    for e in Expression::ALL {
+        cases.push((e.to_string(), weights.activations(e, 1.0)));
+    }
+    let mut ws = Workspace::new(m);
+    for (name, a) in cases {
+        let (s, _) = solve_from_rest(m, &a, &mut ws, &SolveParams::default())
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (inverted, folded) = defects(m, &s);
+        assert_eq!((inverted, folded), (0, 0), "{name}: inverted prisms, folded triangles");
+    }
+}
+
+#[test]
+fn same_inputs_give_bit_identical_positions() {
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let a = weights.sample(Expression::Fear, 0.7, 0.4);
+    let bits = |s: &State| -> Vec<u64> { s.positions.iter().flatten().map(|c| c.to_bits()).collect() };
+    assert_eq!(bits(&solve(&a)), bits(&solve(&a)));
+}
