@@ -6,6 +6,9 @@
 //! Modules (see DESIGN.md 4): `sim` (the face), `observe` (landmarks), `io` (files),
 //! `report` (renders), `rng` (the only source of randomness).
 
+// Small dense matrix algebra reads best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
 pub mod experiments;
 pub mod io;
 pub mod observe;

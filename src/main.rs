@@ -11,7 +11,11 @@ use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSour
 use facelab::report::render::{Camera, RenderOptions};
 
 #[derive(Parser)]
-#[command(name = "facelab", version, about = "Biomechanical facial expression transfer, reproduced")]
+#[command(
+    name = "facelab",
+    version,
+    about = "Biomechanical facial expression transfer, reproduced"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -124,7 +128,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let request = PoseRequest {
                 expression: expression.map(|e| e.parse()).transpose()?,
                 scale,
-                activations: activation.map(|a| parse_assignments(&a)).transpose()?.unwrap_or_default(),
+                activations: activation
+                    .map(|a| parse_assignments(&a))
+                    .transpose()?
+                    .unwrap_or_default(),
                 jaw_rotation,
             };
             let options = RenderOptions {
@@ -149,7 +156,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 samples,
                 seed,
                 levels,
-            } => bench_solve(&face.source(), &levels, samples, seed, &mut std::io::stdout().lock())?,
+            } => bench_solve(
+                &face.source(),
+                &levels,
+                samples,
+                seed,
+                &mut std::io::stdout().lock(),
+            )?,
         },
     }
     Ok(())

@@ -69,9 +69,24 @@ mod tests {
 
     #[test]
     fn same_seed_and_label_give_the_same_numbers() {
-        let a: Vec<u64> = (0..4).map({ let mut s = stream(7, "x/1"); move |_| s.next_u64() }).collect();
-        let b: Vec<u64> = (0..4).map({ let mut s = stream(7, "x/1"); move |_| s.next_u64() }).collect();
-        let c: Vec<u64> = (0..4).map({ let mut s = stream(7, "x/2"); move |_| s.next_u64() }).collect();
+        let a: Vec<u64> = (0..4)
+            .map({
+                let mut s = stream(7, "x/1");
+                move |_| s.next_u64()
+            })
+            .collect();
+        let b: Vec<u64> = (0..4)
+            .map({
+                let mut s = stream(7, "x/1");
+                move |_| s.next_u64()
+            })
+            .collect();
+        let c: Vec<u64> = (0..4)
+            .map({
+                let mut s = stream(7, "x/2");
+                move |_| s.next_u64()
+            })
+            .collect();
         assert_eq!(a, b);
         assert_ne!(a, c);
     }

@@ -4,8 +4,10 @@ use facelab::io::expressions::{default_expressions_path, read_expressions};
 use facelab::sim::expression::Expression;
 use facelab::sim::geom::{cross, dot, norm, sub, V3};
 use facelab::sim::solver::residual;
-use facelab::sim::tissue::prism_volume;
-use facelab::sim::{control_names, solve_from_rest, Activations, FaceModel, SolveParams, State, Workspace};
+use facelab::sim::tissue::{prism_volume, LIP_THICKNESS_SCALE};
+use facelab::sim::{
+    control_names, solve_from_rest, Activations, FaceModel, SolveParams, State, Workspace,
+};
 
 use super::model;
 
@@ -30,7 +32,9 @@ fn surface(s: &State) -> &[V3] {
 }
 
 /// Prisms with non-positive volume, and surface triangles whose normal turned more than 90
-/// degrees from rest (a fold-over).
+/// degrees from rest (a fold-over). Triangles touching the inner lip crease are left out: at
+/// the commissures the rest surface already folds ~150 degrees (see `Tissue::build`), and the
+/// lips rolling there turns those hidden triangles over without any visible fold.
 fn defects(m: &FaceModel, s: &State) -> (usize, usize) {
     let inverted = m
         .tissue
@@ -47,6 +51,10 @@ fn defects(m: &FaceModel, s: &State) -> (usize, usize) {
         .surface
         .triangles
         .iter()
+        .filter(|t| {
+            t.iter()
+                .all(|&v| m.tissue.thickness_scale[v] >= LIP_THICKNESS_SCALE)
+        })
         .filter(|t| dot(normal(&s.positions, t), normal(&rest.positions, t)) <= 0.0)
         .count();
     (inverted, folded)
@@ -87,8 +95,16 @@ fn zygomaticus_major_raises_and_widens_the_lip_corner() {
     let rest = model().rest_state();
     let s = solve(&with(&[("zygomaticus_major_left", 1.0)]));
     let (p, r) = (surface(&s)[291], surface(&rest)[291]);
-    assert!(p[1] - r[1] > 1e-3, "corner rise {:.2} mm", (p[1] - r[1]) * 1e3);
-    assert!(p[0] - r[0] > 1e-3, "corner spread {:.2} mm", (p[0] - r[0]) * 1e3);
+    assert!(
+        p[1] - r[1] > 1e-3,
+        "corner rise {:.2} mm",
+        (p[1] - r[1]) * 1e3
+    );
+    assert!(
+        p[0] - r[0] > 1e-3,
+        "corner spread {:.2} mm",
+        (p[0] - r[0]) * 1e3
+    );
 }
 
 #[test]
@@ -131,7 +147,11 @@ fn orbicularis_oculi_closes_the_eye() {
     for (up, low) in [(159, 145), (386, 374)] {
         let open = |x: &[V3]| norm(sub(x[up], x[low]));
         let ratio = open(surface(&s)) / open(surface(&rest));
-        assert!(ratio < 0.1, "eye {up}/{low} still {:.0}% open", ratio * 100.0);
+        assert!(
+            ratio < 0.1,
+            "eye {up}/{low} still {:.0}% open",
+            ratio * 100.0
+        );
     }
 }
 
@@ -162,18 +182,28 @@ fn no_inverted_elements_for_any_single_muscle_or_expression() {
         cases.push((e.to_string(), weights.activations(e, 1.0)));
     }
     let mut ws = Workspace::new(m);
+    let mut failures = Vec::new();
     for (name, a) in cases {
-        let (s, _) = solve_from_rest(m, &a, &mut ws, &SolveParams::default())
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
-        let (inverted, folded) = defects(m, &s);
-        assert_eq!((inverted, folded), (0, 0), "{name}: inverted prisms, folded triangles");
+        match solve_from_rest(m, &a, &mut ws, &SolveParams::default()) {
+            Ok((s, _)) => {
+                let (inverted, folded) = defects(m, &s);
+                if (inverted, folded) != (0, 0) {
+                    failures.push(format!(
+                        "{name}: {inverted} inverted prisms, {folded} folded triangles"
+                    ));
+                }
+            }
+            Err(e) => failures.push(format!("{name}: {e}")),
+        }
     }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 #[test]
 fn same_inputs_give_bit_identical_positions() {
     let weights = read_expressions(&default_expressions_path()).unwrap();
     let a = weights.sample(Expression::Fear, 0.7, 0.4);
-    let bits = |s: &State| -> Vec<u64> { s.positions.iter().flatten().map(|c| c.to_bits()).collect() };
+    let bits =
+        |s: &State| -> Vec<u64> { s.positions.iter().flatten().map(|c| c.to_bits()).collect() };
     assert_eq!(bits(&solve(&a)), bits(&solve(&a)));
 }

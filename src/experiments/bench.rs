@@ -39,15 +39,29 @@ fn landmark_error(a: &[V3], b: &[V3]) -> (f64, f64) {
     let la = landmarks(a);
     let lb = landmarks(b);
     let d: Vec<f64> = la.iter().zip(&lb).map(|(p, q)| norm(sub(*p, *q))).collect();
-    (d.iter().sum::<f64>() / d.len() as f64, d.iter().cloned().fold(0.0, f64::max))
+    (
+        d.iter().sum::<f64>() / d.len() as f64,
+        d.iter().cloned().fold(0.0, f64::max),
+    )
 }
 
-pub fn bench_solve(source: &FaceSource, levels: &[u8], samples: usize, seed: u64, out: &mut impl Write) -> Result<()> {
+pub fn bench_solve(
+    source: &FaceSource,
+    levels: &[u8],
+    samples: usize,
+    seed: u64,
+    out: &mut impl Write,
+) -> Result<()> {
     let weights = source.weights()?;
     let params = SolveParams::default();
     for &level in levels {
         let model = FaceModel::new(
-            &crate::io::mesh::read_obj(&source.mesh.clone().unwrap_or_else(crate::io::mesh::default_mesh_path))?,
+            &crate::io::mesh::read_obj(
+                &source
+                    .mesh
+                    .clone()
+                    .unwrap_or_else(crate::io::mesh::default_mesh_path),
+            )?,
             crate::sim::FaceParams {
                 subdivisions: level,
                 ..Default::default()
@@ -56,14 +70,38 @@ pub fn bench_solve(source: &FaceSource, levels: &[u8], samples: usize, seed: u64
         let p = format!("solve.nonlinear.sub{level}");
         let n = model.vertex_count();
         line(out, &format!("{p}.surface_vertices"), n as f64, "count")?;
-        line(out, &format!("{p}.free_nodes"), model.free.iter().filter(|&&f| f).count() as f64, "count")?;
-        line(out, &format!("{p}.springs"), model.tissue.springs.len() as f64, "count")?;
-        line(out, &format!("{p}.prisms"), model.tissue.prisms.len() as f64, "count")?;
-        let count = if level == 0 { samples } else { (samples / 5).max(3) };
+        line(
+            out,
+            &format!("{p}.free_nodes"),
+            model.free.iter().filter(|&&f| f).count() as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.springs"),
+            model.tissue.springs.len() as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.prisms"),
+            model.tissue.prisms.len() as f64,
+            "count",
+        )?;
+        let count = if level == 0 {
+            samples
+        } else {
+            (samples / 5).max(3)
+        };
         let batch = random_samples(&weights, seed, count);
         let t = Instant::now();
         let mut ws = Workspace::new(&model);
-        line(out, &format!("{p}.setup_ms"), t.elapsed().as_secs_f64() * 1e3, "ms")?;
+        line(
+            out,
+            &format!("{p}.setup_ms"),
+            t.elapsed().as_secs_f64() * 1e3,
+            "ms",
+        )?;
 
         // Cold: each sample from rest by continuation.
         let mut cold_iterations = 0;
@@ -76,7 +114,12 @@ pub fn bench_solve(source: &FaceSource, levels: &[u8], samples: usize, seed: u64
         }
         let cold = t.elapsed().as_secs_f64() / count as f64;
         line(out, &format!("{p}.cold_ms_per_sample"), cold * 1e3, "ms")?;
-        line(out, &format!("{p}.cold_iterations_per_sample"), cold_iterations as f64 / count as f64, "count")?;
+        line(
+            out,
+            &format!("{p}.cold_iterations_per_sample"),
+            cold_iterations as f64 / count as f64,
+            "count",
+        )?;
 
         // Warm: each sample from the previous sample's equilibrium.
         let mut state = model.rest_state();
@@ -88,12 +131,22 @@ pub fn bench_solve(source: &FaceSource, levels: &[u8], samples: usize, seed: u64
         }
         let warm = t.elapsed().as_secs_f64() / count as f64;
         line(out, &format!("{p}.warm_ms_per_sample"), warm * 1e3, "ms")?;
-        line(out, &format!("{p}.warm_iterations_per_sample"), warm_iterations as f64 / count as f64, "count")?;
+        line(
+            out,
+            &format!("{p}.warm_iterations_per_sample"),
+            warm_iterations as f64 / count as f64,
+            "count",
+        )?;
 
         // Linear basis.
         let t = Instant::now();
         let basis = LinearBasis::build(&model, &params)?;
-        line(out, &format!("solve.linear.sub{level}.build_s"), t.elapsed().as_secs_f64(), "s")?;
+        line(
+            out,
+            &format!("solve.linear.sub{level}.build_s"),
+            t.elapsed().as_secs_f64(),
+            "s",
+        )?;
         let mut surface = Vec::new();
         let repeats = 200;
         let t = Instant::now();
@@ -104,7 +157,12 @@ pub fn bench_solve(source: &FaceSource, levels: &[u8], samples: usize, seed: u64
             }
         }
         let per = t.elapsed().as_secs_f64() / (repeats * count) as f64;
-        line(out, &format!("solve.linear.sub{level}.us_per_sample"), per * 1e6, "us")?;
+        line(
+            out,
+            &format!("solve.linear.sub{level}.us_per_sample"),
+            per * 1e6,
+            "us",
+        )?;
         let (mut mean, mut max) = (0.0, 0.0f64);
         for (a, s) in batch.iter().zip(&states) {
             basis.evaluate(a, &mut surface);
@@ -112,8 +170,18 @@ pub fn bench_solve(source: &FaceSource, levels: &[u8], samples: usize, seed: u64
             mean += m / count as f64;
             max = max.max(x);
         }
-        line(out, &format!("solve.linear.sub{level}.landmark_error_mean_mm"), mean * 1e3, "mm")?;
-        line(out, &format!("solve.linear.sub{level}.landmark_error_max_mm"), max * 1e3, "mm")?;
+        line(
+            out,
+            &format!("solve.linear.sub{level}.landmark_error_mean_mm"),
+            mean * 1e3,
+            "mm",
+        )?;
+        line(
+            out,
+            &format!("solve.linear.sub{level}.landmark_error_max_mm"),
+            max * 1e3,
+            "mm",
+        )?;
         let motion: f64 = batch
             .iter()
             .zip(&states)
@@ -123,7 +191,12 @@ pub fn bench_solve(source: &FaceSource, levels: &[u8], samples: usize, seed: u64
             })
             .sum::<f64>()
             / count as f64;
-        line(out, &format!("solve.nonlinear.sub{level}.landmark_motion_mean_mm"), motion * 1e3, "mm")?;
+        line(
+            out,
+            &format!("solve.nonlinear.sub{level}.landmark_motion_mean_mm"),
+            motion * 1e3,
+            "mm",
+        )?;
         out.flush()?;
     }
     Ok(())

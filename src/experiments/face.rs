@@ -11,7 +11,9 @@ use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::controls::{control_names, JAW_ROTATION};
 use crate::sim::expression::{Expression, ExpressionWeights};
-use crate::sim::{solve_from_rest, Activations, FaceModel, FaceParams, SolveParams, State, Workspace};
+use crate::sim::{
+    solve_from_rest, Activations, FaceModel, FaceParams, SolveParams, State, Workspace,
+};
 
 /// Where the face comes from.
 #[derive(Clone, Debug, Default)]
@@ -31,11 +33,15 @@ impl FaceSource {
             subdivisions: self.subdivisions,
             ..FaceParams::default()
         };
-        FaceModel::new(&mesh, params).with_context(|| format!("{}: cannot build the face model", path.display()))
+        FaceModel::new(&mesh, params)
+            .with_context(|| format!("{}: cannot build the face model", path.display()))
     }
 
     pub fn weights(&self) -> Result<ExpressionWeights> {
-        let path = self.expressions.clone().unwrap_or_else(default_expressions_path);
+        let path = self
+            .expressions
+            .clone()
+            .unwrap_or_else(default_expressions_path);
         Ok(read_expressions(&path)?)
     }
 }
@@ -92,7 +98,13 @@ pub fn pose(model: &FaceModel, a: &Activations, ws: &mut Workspace) -> Result<St
         let active: Vec<String> = control_names()
             .iter()
             .zip(a.values())
-            .filter(|(name, &v)| v != if name.as_str() == "jaw_slide" || name.as_str() == "jaw_twist" { 0.5 } else { 0.0 })
+            .filter(|(name, &v)| {
+                v != if name.as_str() == "jaw_slide" || name.as_str() == "jaw_twist" {
+                    0.5
+                } else {
+                    0.0
+                }
+            })
             .map(|(name, v)| format!("{name}={v}"))
             .collect();
         format!("solving the face for {}", active.join(","))
@@ -101,7 +113,12 @@ pub fn pose(model: &FaceModel, a: &Activations, ws: &mut Workspace) -> Result<St
 }
 
 /// `facelab render`.
-pub fn render_to(source: &FaceSource, request: &PoseRequest, options: &RenderOptions, out: &Path) -> Result<()> {
+pub fn render_to(
+    source: &FaceSource,
+    request: &PoseRequest,
+    options: &RenderOptions,
+    out: &Path,
+) -> Result<()> {
     let model = source.model()?;
     let weights = source.weights()?;
     let a = request.activations(&weights)?;
@@ -154,7 +171,11 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
         let mut a = Activations::neutral();
         a.set_index(index, 1.0)?;
         let state = pose(&model, &a, &mut ws)?;
-        write(&state, &small, out.join("single").join(format!("{name}.png")))?;
+        write(
+            &state,
+            &small,
+            out.join("single").join(format!("{name}.png")),
+        )?;
     }
     Ok(written)
 }

@@ -79,7 +79,11 @@ pub fn read_expressions(path: &Path) -> Result<ExpressionWeights, ExpressionFile
         let control = record[1].trim();
         if let Some(pair) = MUSCLE_PAIRS.iter().position(|m| m.name == control) {
             for side in [Side::Left, Side::Right] {
-                weights.set(expression, crate::sim::controls::muscle_index(pair, side), weight);
+                weights.set(
+                    expression,
+                    crate::sim::controls::muscle_index(pair, side),
+                    weight,
+                );
             }
         } else if let Some(index) = control_index(control) {
             if index == JAW_SLIDE || index == JAW_TWIST {

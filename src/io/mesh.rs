@@ -71,7 +71,10 @@ fn parse_obj(text: &str) -> Result<Mesh, ObjError> {
             Some("v") => {
                 let coords: Vec<&str> = parts.collect();
                 if coords.len() < 3 {
-                    return Err(err(format!("vertex needs 3 coordinates, found {}", coords.len())));
+                    return Err(err(format!(
+                        "vertex needs 3 coordinates, found {}",
+                        coords.len()
+                    )));
                 }
                 let mut p = [0.0; 3];
                 for (k, c) in coords[..3].iter().enumerate() {
@@ -88,7 +91,10 @@ fn parse_obj(text: &str) -> Result<Mesh, ObjError> {
             Some("f") => {
                 let idx: Vec<&str> = parts.collect();
                 if idx.len() != 3 {
-                    return Err(err(format!("face must be a triangle, found {} corners", idx.len())));
+                    return Err(err(format!(
+                        "face must be a triangle, found {} corners",
+                        idx.len()
+                    )));
                 }
                 let mut t = [0usize; 3];
                 for (k, c) in idx.iter().enumerate() {

@@ -118,14 +118,35 @@ impl Target {
         if s.iter().any(|q| q[2] <= 0.0) {
             return;
         }
-        let area = (s[1][0] - s[0][0]) * (s[2][1] - s[0][1]) - (s[2][0] - s[0][0]) * (s[1][1] - s[0][1]);
+        let area =
+            (s[1][0] - s[0][0]) * (s[2][1] - s[0][1]) - (s[2][0] - s[0][0]) * (s[1][1] - s[0][1]);
         if area.abs() < 1e-12 {
             return;
         }
-        let min_x = s.iter().map(|q| q[0]).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
-        let max_x = s.iter().map(|q| q[0]).fold(f64::NEG_INFINITY, f64::max).ceil().min(self.width as f64 - 1.0);
-        let min_y = s.iter().map(|q| q[1]).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
-        let max_y = s.iter().map(|q| q[1]).fold(f64::NEG_INFINITY, f64::max).ceil().min(self.height as f64 - 1.0);
+        let min_x = s
+            .iter()
+            .map(|q| q[0])
+            .fold(f64::INFINITY, f64::min)
+            .floor()
+            .max(0.0) as usize;
+        let max_x = s
+            .iter()
+            .map(|q| q[0])
+            .fold(f64::NEG_INFINITY, f64::max)
+            .ceil()
+            .min(self.width as f64 - 1.0);
+        let min_y = s
+            .iter()
+            .map(|q| q[1])
+            .fold(f64::INFINITY, f64::min)
+            .floor()
+            .max(0.0) as usize;
+        let max_y = s
+            .iter()
+            .map(|q| q[1])
+            .fold(f64::NEG_INFINITY, f64::max)
+            .ceil()
+            .min(self.height as f64 - 1.0);
         if max_x < 0.0 || max_y < 0.0 {
             return;
         }
@@ -149,12 +170,17 @@ impl Target {
                 self.color[i] = match n {
                     None => base,
                     Some(n) => {
-                        let mut normal = normalize(add(add(scale(n[0], w0), scale(n[1], w1)), scale(n[2], w2)));
-                        let to_eye = normalize(sub(proj.eye, add(add(scale(p[0], w0), scale(p[1], w1)), scale(p[2], w2))));
+                        let mut normal =
+                            normalize(add(add(scale(n[0], w0), scale(n[1], w1)), scale(n[2], w2)));
+                        let to_eye = normalize(sub(
+                            proj.eye,
+                            add(add(scale(p[0], w0), scale(p[1], w1)), scale(p[2], w2)),
+                        ));
                         if dot(normal, to_eye) < 0.0 {
                             normal = scale(normal, -1.0);
                         }
-                        let diffuse = 0.72 * dot(normal, light).max(0.0) + 0.18 * dot(normal, fill).max(0.0);
+                        let diffuse =
+                            0.72 * dot(normal, light).max(0.0) + 0.18 * dot(normal, fill).max(0.0);
                         let half = normalize(add(light, to_eye));
                         let specular = 0.12 * dot(normal, half).max(0.0).powi(24);
                         base.map(|c| (c * (0.22 + diffuse) + specular).min(1.0))
@@ -169,7 +195,11 @@ impl Target {
         let steps = (len * 2.0).ceil().max(1.0) as usize;
         for k in 0..=steps {
             let t = k as f64 / steps as f64;
-            self.disc([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])], radius, color);
+            self.disc(
+                [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])],
+                radius,
+                color,
+            );
         }
     }
 
@@ -229,16 +259,36 @@ pub fn render(model: &FaceModel, state: &State, options: &RenderOptions) -> RgbI
     let surface = state.surface(n);
     let normals = surface_normals(model, surface);
     for t in &model.surface.triangles {
-        target.triangle(&proj, t.map(|v| surface[v]), Some(t.map(|v| normals[v])), SKIN);
+        target.triangle(
+            &proj,
+            t.map(|v| surface[v]),
+            Some(t.map(|v| normals[v])),
+            SKIN,
+        );
     }
-    // Openings: a dark fan over the skull-sheet rim, set back behind the surface.
-    let holes = [(&model.rig.mouth, MOUTH), (&model.rig.eyes[0].contour, EYE), (&model.rig.eyes[1].contour, EYE)];
+    // Openings: a dark fan just behind the opening's rim, so nothing behind the face shows.
+    let holes = [
+        (&model.rig.mouth, MOUTH),
+        (&model.rig.eyes[0].contour, EYE),
+        (&model.rig.eyes[1].contour, EYE),
+    ];
     for (contour, colour) in holes {
-        let rim: Vec<V3> = contour.iter().map(|&v| state.positions[SKULL * n + v]).collect();
-        let mut centre = scale(rim.iter().fold([0.0; 3], |acc, &p| add(acc, p)), 1.0 / rim.len() as f64);
+        let rim: Vec<V3> = contour
+            .iter()
+            .map(|&v| state.positions[SKULL * n + v])
+            .collect();
+        let mut centre = scale(
+            rim.iter().fold([0.0; 3], |acc, &p| add(acc, p)),
+            1.0 / rim.len() as f64,
+        );
         centre[2] -= 0.01;
         for k in 0..rim.len() {
-            target.triangle(&proj, [centre, rim[k], rim[(k + 1) % rim.len()]], None, colour);
+            target.triangle(
+                &proj,
+                [centre, rim[k], rim[(k + 1) % rim.len()]],
+                None,
+                colour,
+            );
         }
     }
     if options.muscle_overlay {
@@ -250,7 +300,9 @@ pub fn render(model: &FaceModel, state: &State, options: &RenderOptions) -> RgbI
             }
             let total: f64 = m.nodes.iter().map(|&(_, f)| f).sum();
             let insertion = scale(
-                m.nodes.iter().fold([0.0; 3], |acc, &(node, f)| add(acc, scale(state.positions[node], f))),
+                m.nodes.iter().fold([0.0; 3], |acc, &(node, f)| {
+                    add(acc, scale(state.positions[node], f))
+                }),
                 1.0 / total,
             );
             let colour = activation_colour(act[i]);

@@ -60,7 +60,9 @@ fn suggestion(name: &str) -> String {
         .iter()
         .min_by_key(|candidate| edit_distance(name, candidate));
     match best {
-        Some(b) if edit_distance(name, b) <= name.len() / 2 + 2 => format!(" (did you mean `{b}`?)"),
+        Some(b) if edit_distance(name, b) <= name.len() / 2 + 2 => {
+            format!(" (did you mean `{b}`?)")
+        }
         _ => String::new(),
     }
 }

@@ -31,7 +31,9 @@ pub enum MeshError {
     NonManifold(usize, usize),
     #[error("vertex {0} has a non-finite coordinate")]
     NonFinite(usize),
-    #[error("vertex {vertex} has no mirror image across x = 0 (nearest is {distance_m:.2e} m away)")]
+    #[error(
+        "vertex {vertex} has no mirror image across x = 0 (nearest is {distance_m:.2e} m away)"
+    )]
     NotSymmetric { vertex: usize, distance_m: f64 },
 }
 

@@ -106,11 +106,17 @@ impl FaceModel {
         for v in 0..n {
             free[SKULL * n + v] = false;
         }
-        let held = rig.outer.iter().copied().chain(
-            rig.eyes
-                .iter()
-                .flat_map(|e| e.upper.iter().chain(&e.lower).map(|m| m.vertex).chain(e.corners)),
-        );
+        let held = rig
+            .outer
+            .iter()
+            .copied()
+            .chain(rig.eyes.iter().flat_map(|e| {
+                e.upper
+                    .iter()
+                    .chain(&e.lower)
+                    .map(|m| m.vertex)
+                    .chain(e.corners)
+            }));
         for v in held {
             for sheet in 0..SHEETS {
                 free[sheet * n + v] = false;
@@ -144,7 +150,8 @@ impl FaceModel {
             })
             .collect();
         let xs = surface.positions.iter().map(|p| p[0]);
-        let face_width = xs.clone().fold(f64::NEG_INFINITY, f64::max) - xs.fold(f64::INFINITY, f64::min);
+        let face_width =
+            xs.clone().fold(f64::NEG_INFINITY, f64::max) - xs.fold(f64::INFINITY, f64::min);
         Ok(FaceModel {
             params,
             surface,
@@ -188,10 +195,10 @@ impl FaceModel {
     /// The kinematic configuration for `a`.
     pub fn pose(&self, a: &Activations) -> Pose {
         let n = self.vertex_count();
-        let jaw = self
-            .params
-            .jaw
-            .transform(a.get(JAW_ROTATION), a.get(JAW_SLIDE), a.get(JAW_TWIST));
+        let jaw =
+            self.params
+                .jaw
+                .transform(a.get(JAW_ROTATION), a.get(JAW_SLIDE), a.get(JAW_TWIST));
         let mut fixed = vec![[0.0; 3]; self.node_count()];
         for node in 0..self.node_count() {
             if !self.free[node] {
@@ -212,11 +219,17 @@ impl FaceModel {
                 lid(LidAction::Raise),
             );
             let e = &self.rig.eyes[eye];
-            let margins = e.upper.iter().map(|m| (m, true)).chain(e.lower.iter().map(|m| (m, false)));
+            let margins = e
+                .upper
+                .iter()
+                .map(|m| (m, true))
+                .chain(e.lower.iter().map(|m| (m, false)));
             for (m, upper) in margins {
                 for sheet in 0..SHEETS {
                     let node = sheet * n + m.vertex;
-                    fixed[node] = self.rig.lid_motion(eye, m, upper, fractions, self.tissue.rest[node]);
+                    fixed[node] =
+                        self.rig
+                            .lid_motion(eye, m, upper, fractions, self.tissue.rest[node]);
                 }
             }
         }

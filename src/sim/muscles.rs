@@ -95,6 +95,8 @@ pub struct MusclePair {
     pub action: Action,
 }
 
+// One argument per column of the anatomy table.
+#[allow(clippy::too_many_arguments)]
 const fn linear(
     name: &'static str,
     au: u8,
@@ -119,6 +121,7 @@ const fn linear(
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 const fn sphincter(
     name: &'static str,
     au: u8,
@@ -159,37 +162,217 @@ const NONE: V3 = [0.0, 0.0, 0.0];
 /// oculi, mentalis and orbicularis oris groups.
 pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     // Forehead: frontalis in three bellies, origin in the galea aponeurotica above the mesh.
-    linear("frontalis_medial", 1, 11.2, 109, [0.0, 0.025, -0.01], Bone::Skull, 107, 1.4),
-    linear("frontalis_intermediate", 2, 10.0, 67, [0.0, 0.025, -0.01], Bone::Skull, 66, 1.3),
-    linear("frontalis_lateral", 2, 11.2, 103, [0.0, 0.025, -0.01], Bone::Skull, 63, 1.4),
+    linear(
+        "frontalis_medial",
+        1,
+        11.2,
+        109,
+        [0.0, 0.025, -0.01],
+        Bone::Skull,
+        107,
+        1.4,
+    ),
+    linear(
+        "frontalis_intermediate",
+        2,
+        10.0,
+        67,
+        [0.0, 0.025, -0.01],
+        Bone::Skull,
+        66,
+        1.3,
+    ),
+    linear(
+        "frontalis_lateral",
+        2,
+        11.2,
+        103,
+        [0.0, 0.025, -0.01],
+        Bone::Skull,
+        63,
+        1.4,
+    ),
     // Glabella: brow lowerers.
-    linear("corrugator_supercilii", 4, 6.8, 193, NONE, Bone::Skull, 65, 1.2),
-    linear("depressor_supercilii", 4, 2.5, 122, NONE, Bone::Skull, 55, 0.9),
-    linear("procerus", 4, 2.0, 6, [-0.003, 0.0, 0.0], Bone::Skull, 8, 0.9),
+    linear(
+        "corrugator_supercilii",
+        4,
+        6.8,
+        193,
+        NONE,
+        Bone::Skull,
+        65,
+        1.2,
+    ),
+    linear(
+        "depressor_supercilii",
+        4,
+        2.5,
+        122,
+        NONE,
+        Bone::Skull,
+        55,
+        0.9,
+    ),
+    linear(
+        "procerus",
+        4,
+        2.0,
+        6,
+        [-0.003, 0.0, 0.0],
+        Bone::Skull,
+        8,
+        0.9,
+    ),
     // Eye.
-    sphincter("orbicularis_oculi_orbital", 6, 18.0, Opening::Eye, Arc::Whole, [2.8, 2.4], 0.6, 1.0),
+    sphincter(
+        "orbicularis_oculi_orbital",
+        6,
+        18.0,
+        Opening::Eye,
+        Arc::Whole,
+        [2.8, 2.4],
+        0.6,
+        1.0,
+    ),
     lid("orbicularis_oculi_preseptal", 7, LidAction::Tighten),
     lid("orbicularis_oculi_pretarsal", 45, LidAction::Close),
     lid("levator_palpebrae_superioris", 5, LidAction::Raise),
     // Nose and upper lip.
-    linear("levator_labii_superioris_alaeque_nasi", 9, 4.5, 188, NONE, Bone::Skull, 129, 0.9),
+    linear(
+        "levator_labii_superioris_alaeque_nasi",
+        9,
+        3.0,
+        188,
+        NONE,
+        Bone::Skull,
+        129,
+        0.9,
+    ),
     linear("nasalis", 9, 1.5, 203, NONE, Bone::Skull, 126, 0.7),
-    linear("levator_labii_superioris", 10, 5.2, 100, NONE, Bone::Skull, 39, 0.9),
-    linear("zygomaticus_minor", 10, 3.0, 118, NONE, Bone::Skull, 40, 0.8),
+    linear(
+        "levator_labii_superioris",
+        10,
+        5.2,
+        100,
+        NONE,
+        Bone::Skull,
+        39,
+        0.9,
+    ),
+    linear(
+        "zygomaticus_minor",
+        10,
+        3.0,
+        118,
+        NONE,
+        Bone::Skull,
+        40,
+        0.8,
+    ),
     // Mouth corner (modiolus).
-    linear("zygomaticus_major", 12, 12.0, 123, NONE, Bone::Skull, 61, 1.1),
-    linear("levator_anguli_oris", 12, 4.5, 36, NONE, Bone::Skull, 61, 0.9),
+    linear(
+        "zygomaticus_major",
+        12,
+        12.0,
+        123,
+        NONE,
+        Bone::Skull,
+        61,
+        1.1,
+    ),
+    linear(
+        "levator_anguli_oris",
+        12,
+        4.5,
+        36,
+        NONE,
+        Bone::Skull,
+        61,
+        0.9,
+    ),
     linear("buccinator", 14, 6.0, 215, NONE, Bone::Skull, 61, 0.9),
     linear("risorius", 20, 8.0, 58, NONE, Bone::Skull, 61, 0.9),
-    linear("platysma", 20, 4.0, 136, [0.0, -0.03, -0.01], Bone::Skull, 57, 1.3),
-    linear("depressor_anguli_oris", 15, 5.9, 150, NONE, Bone::Mandible, 61, 0.9),
+    linear(
+        "platysma",
+        20,
+        4.0,
+        136,
+        [0.0, -0.03, -0.01],
+        Bone::Skull,
+        57,
+        1.3,
+    ),
+    linear(
+        "depressor_anguli_oris",
+        15,
+        5.9,
+        150,
+        NONE,
+        Bone::Mandible,
+        61,
+        0.9,
+    ),
     // Lower lip and chin.
-    linear("depressor_labii_inferioris", 25, 3.5, 32, NONE, Bone::Mandible, 181, 0.8),
-    linear("mentalis", 17, 4.0, 18, [-0.004, 0.0, 0.0], Bone::Mandible, 208, 1.0),
-    linear("incisivus_labii_superioris", 23, 2.0, 165, NONE, Bone::Skull, 185, 0.7),
-    linear("incisivus_labii_inferioris", 23, 2.0, 194, NONE, Bone::Mandible, 43, 0.7),
-    sphincter("orbicularis_oris_upper", 23, 4.5, Opening::Mouth, Arc::Upper, [3.0, 1.6], 0.0, 0.5),
-    sphincter("orbicularis_oris_lower", 23, 4.5, Opening::Mouth, Arc::Lower, [3.0, 1.6], 0.0, 0.5),
+    linear(
+        "depressor_labii_inferioris",
+        25,
+        3.5,
+        32,
+        NONE,
+        Bone::Mandible,
+        181,
+        0.8,
+    ),
+    linear(
+        "mentalis",
+        17,
+        4.0,
+        18,
+        [-0.004, 0.0, 0.0],
+        Bone::Mandible,
+        208,
+        1.0,
+    ),
+    linear(
+        "incisivus_labii_superioris",
+        23,
+        2.0,
+        165,
+        NONE,
+        Bone::Skull,
+        185,
+        0.7,
+    ),
+    linear(
+        "incisivus_labii_inferioris",
+        23,
+        2.0,
+        194,
+        NONE,
+        Bone::Mandible,
+        43,
+        0.7,
+    ),
+    sphincter(
+        "orbicularis_oris_upper",
+        23,
+        4.5,
+        Opening::Mouth,
+        Arc::Upper,
+        [3.0, 1.6],
+        0.0,
+        0.5,
+    ),
+    sphincter(
+        "orbicularis_oris_lower",
+        23,
+        4.5,
+        Opening::Mouth,
+        Arc::Lower,
+        [3.0, 1.6],
+        0.0,
+        0.5,
+    ),
 ];
 
 /// Subject's side. Left is +x.
@@ -221,11 +404,19 @@ pub struct Muscle {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum MuscleKind {
     /// Pulls each node toward `origin` (rest position; moved by the jaw if on the mandible).
-    Linear { origin: V3, bone: Bone, insertion: V3 },
+    Linear {
+        origin: V3,
+        bone: Bone,
+        insertion: V3,
+    },
     /// Pulls each node toward `centre` in the x-y (face) plane with the smoothed potential
     /// `f (sqrt(dx^2 + (k dy)^2 + c^2) - c)`: `k` weakens the vertical pull (lips close without
     /// crossing), the core `c` makes the pull fade at the centre instead of a cone tip.
-    Sphincter { centre: V3, vertical: f64, core: f64 },
+    Sphincter {
+        centre: V3,
+        vertical: f64,
+        core: f64,
+    },
     /// Acts through the lid rig; no nodes.
     Lid(LidAction),
 }
@@ -316,7 +507,11 @@ pub fn attach(
                 // Halves split at the centre line; nodes on a split line go half to each.
                 let side_share = if opening == Opening::Mouth {
                     let x = p[0] - centre[0];
-                    let own = if side == Side::Right { x < 0.0 } else { x > 0.0 };
+                    let own = if side == Side::Right {
+                        x < 0.0
+                    } else {
+                        x > 0.0
+                    };
                     if x.abs() < 1e-9 {
                         0.5
                     } else if own {

@@ -97,6 +97,9 @@ pub struct Margin {
     pub closed_scale: f64,
 }
 
+/// Fraction of the closing angle turned by the margin vertices next to the eye corners.
+const CANTHUS_TAPER: f64 = 0.6;
+
 /// One eye's lid margins, turning about an x-parallel axis through `centre`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Eye {
@@ -233,11 +236,19 @@ impl Rig {
         let radius = |q: V3| (q[1] - centre[1]).hypot(q[2] - centre[2]);
         let angles = |path: &[usize], other: &[usize]| -> Vec<Margin> {
             path.iter()
-                .map(|&v| {
+                .enumerate()
+                .map(|(i, &v)| {
                     let q = at_x(other, (c0, c1), p[v][0], p);
+                    // The margin vertices next to a canthus turn less, so the skin triangle
+                    // between the fixed corner and the lid does not fold over it.
+                    let taper = if i == 0 || i + 1 == path.len() {
+                        CANTHUS_TAPER
+                    } else {
+                        1.0
+                    };
                     Margin {
                         vertex: v,
-                        angle: (elevation(p[v], centre) - elevation(q, centre)).abs(),
+                        angle: taper * (elevation(p[v], centre) - elevation(q, centre)).abs(),
                         closed_scale: 0.5 * (radius(p[v]) + radius(q)) / radius(p[v]),
                     }
                 })
@@ -329,13 +340,21 @@ impl Rig {
     /// Where the lid moves a point `x` of margin `m` (any sheet): turned about the eye axis by
     /// its fraction of the closing angle (upper margins down, lower up) and drawn toward the
     /// meeting radius in proportion to how closed the eye is.
-    pub fn lid_motion(&self, eye: usize, m: &Margin, upper: bool, fractions: (f64, f64), x: V3) -> V3 {
+    pub fn lid_motion(
+        &self,
+        eye: usize,
+        m: &Margin,
+        upper: bool,
+        fractions: (f64, f64),
+        x: V3,
+    ) -> V3 {
         let e = &self.eyes[eye];
         let angle = if upper { fractions.0 } else { -fractions.1 } * m.angle;
         let closure = (fractions.0 + fractions.1).max(0.0);
         let radial = 1.0 + closure * (m.closed_scale - 1.0);
         let r = sub(x, e.centre);
-        let turned = Rot3::about_axis([1.0, 0.0, 0.0], angle).apply([r[0], radial * r[1], radial * r[2]]);
+        let turned =
+            Rot3::about_axis([1.0, 0.0, 0.0], angle).apply([r[0], radial * r[1], radial * r[2]]);
         add(e.centre, turned)
     }
 

@@ -21,7 +21,7 @@ use super::controls::Activations;
 use super::geom::{cross, dot, norm, scale, sub, V3};
 use super::model::{FaceModel, Pose, State};
 use super::muscles::MuscleKind;
-use super::tissue::{prism_volume, PRISM_TETS};
+use super::tissue::{prism_volume, PRISM_TETS, PRISM_TET_WEIGHT};
 
 /// Solver settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -286,7 +286,8 @@ fn spring_law(s: &super::tissue::Spring, l: f64, strain: f64, factor: f64) -> (f
     let knee = strain * s.rest;
     if s.biphasic && e > knee {
         let extra = e - knee;
-        let energy = 0.5 * s.k * knee * knee + s.k * knee * extra + 0.5 * s.k * factor * extra * extra;
+        let energy =
+            0.5 * s.k * knee * knee + s.k * knee * extra + 0.5 * s.k * factor * extra * extra;
         (energy, s.k * knee + s.k * factor * extra, s.k * factor)
     } else {
         (0.5 * s.k * e * e, s.k * e, s.k)
@@ -300,11 +301,19 @@ fn prism_volume_gradient(p: &[V3; 6]) -> (f64, [V3; 6]) {
     for t in &PRISM_TETS {
         let [a, b, c, d] = t.map(|i| p[i]);
         let (ba, ca, da) = (sub(b, a), sub(c, a), sub(d, a));
-        volume += dot(cross(ba, ca), da) / 6.0;
-        let gb = scale(cross(ca, da), 1.0 / 6.0);
-        let gc = scale(cross(da, ba), 1.0 / 6.0);
-        let gd = scale(cross(ba, ca), 1.0 / 6.0);
-        let ga = scale([gb[0] + gc[0] + gd[0], gb[1] + gc[1] + gd[1], gb[2] + gc[2] + gd[2]], -1.0);
+        let w = PRISM_TET_WEIGHT / 6.0;
+        volume += w * dot(cross(ba, ca), da);
+        let gb = scale(cross(ca, da), w);
+        let gc = scale(cross(da, ba), w);
+        let gd = scale(cross(ba, ca), w);
+        let ga = scale(
+            [
+                gb[0] + gc[0] + gd[0],
+                gb[1] + gc[1] + gd[1],
+                gb[2] + gc[2] + gd[2],
+            ],
+            -1.0,
+        );
         for (k, gk) in [(t[0], ga), (t[1], gb), (t[2], gc), (t[3], gd)] {
             g[k] = [g[k][0] + gk[0], g[k][1] + gk[1], g[k][2] + gk[2]];
         }
@@ -335,13 +344,17 @@ fn prism_volume_hessian(p: &[V3; 6]) -> [[[[f64; 3]; 3]; 6]; 6] {
     for t in &PRISM_TETS {
         let e = [1, 2, 3].map(|k| sub(p[t[k]], p[t[0]]));
         let mut local = [[[[0.0; 3]; 3]; 4]; 4];
-        let s = 1.0 / 6.0;
+        let s = PRISM_TET_WEIGHT / 6.0;
         local[1][2] = skew(e[2], -s);
         local[1][3] = skew(e[1], s);
         local[2][3] = skew(e[0], -s);
         for (i, j) in [(1, 2), (1, 3), (2, 3)] {
             let m = local[i][j];
-            local[j][i] = [[m[0][0], m[1][0], m[2][0]], [m[0][1], m[1][1], m[2][1]], [m[0][2], m[1][2], m[2][2]]];
+            local[j][i] = [
+                [m[0][0], m[1][0], m[2][0]],
+                [m[0][1], m[1][1], m[2][1]],
+                [m[0][2], m[1][2], m[2][2]],
+            ];
         }
         for j in 1..4 {
             for r in 0..3 {
@@ -378,7 +391,13 @@ fn energy(model: &FaceModel, pose: &Pose, x: &[V3]) -> f64 {
     let mut e = 0.0;
     for s in &model.tissue.springs {
         let l = norm(sub(x[s.nodes[1]], x[s.nodes[0]]));
-        e += spring_law(s, l, tp.epidermis_stiffening_strain, tp.epidermis_stiffening_factor).0;
+        e += spring_law(
+            s,
+            l,
+            tp.epidermis_stiffening_strain,
+            tp.epidermis_stiffening_factor,
+        )
+        .0;
     }
     for p in &model.tissue.prisms {
         let volume = prism_volume(&p.nodes.map(|i| x[i]));
@@ -418,7 +437,14 @@ fn energy(model: &FaceModel, pose: &Pose, x: &[V3]) -> f64 {
 }
 
 /// Gradient over free dofs, and (when `hessian`) the Hessian values.
-fn assemble(model: &FaceModel, pose: &Pose, x: &[V3], ws: &mut Workspace, hessian: bool, full: bool) {
+fn assemble(
+    model: &FaceModel,
+    pose: &Pose,
+    x: &[V3],
+    ws: &mut Workspace,
+    hessian: bool,
+    full: bool,
+) {
     let tp = &model.params.tissue;
     let pat = &ws.pattern;
     let g = &mut ws.gradient;
@@ -447,14 +473,23 @@ fn assemble(model: &FaceModel, pose: &Pose, x: &[V3], ws: &mut Workspace, hessia
         let d = sub(x[b], x[a]);
         let l = norm(d);
         let u = scale(d, 1.0 / l);
-        let (_, force, kt) = spring_law(s, l, tp.epidermis_stiffening_strain, tp.epidermis_stiffening_factor);
+        let (_, force, kt) = spring_law(
+            s,
+            l,
+            tp.epidermis_stiffening_strain,
+            tp.epidermis_stiffening_factor,
+        );
         let fv = scale(u, force);
         add_grad(g, a, fv, -1.0);
         add_grad(g, b, fv, 1.0);
         if hessian {
             // kt u u^T + max(f/l, 0) (I - u u^T): the compressive geometric term is dropped
             // so the block stays positive semi-definite.
-            let geo = if full { force / l } else { (force / l).max(0.0) };
+            let geo = if full {
+                force / l
+            } else {
+                (force / l).max(0.0)
+            };
             let k = iso_plus_outer(geo, u, kt - geo);
             add_diag(h, a, &k);
             add_diag(h, b, &k);
@@ -463,7 +498,9 @@ fn assemble(model: &FaceModel, pose: &Pose, x: &[V3], ws: &mut Workspace, hessia
     }
     for (pi, p) in model.tissue.prisms.iter().enumerate() {
         let q = p.nodes.map(|i| x[i]);
-        let (v, dv) = prism_volume_gradient(&q);
+        let (_, dv) = prism_volume_gradient(&q);
+        // The volume itself as `prism_volume` sums it, bit for bit as at rest.
+        let v = prism_volume(&q);
         // psi(J) = kappa V0 (0.5 (J - 1)^2 + b (J - 1 - ln J)), J = V / V0:
         // grad = kappa (J - 1 + b (1 - 1/J)) grad V,
         // hess = kappa (1 + b / J^2) / V0 grad V grad V^T + kappa (J - 1 + b (1 - 1/J)) hess V.
@@ -475,7 +512,11 @@ fn assemble(model: &FaceModel, pose: &Pose, x: &[V3], ws: &mut Workspace, hessia
         }
         if hessian {
             // c grad V grad V^T, plus (full) c (V - V0) hess V.
-            let second = if full { Some(prism_volume_hessian(&q)) } else { None };
+            let second = if full {
+                Some(prism_volume_hessian(&q))
+            } else {
+                None
+            };
             let block = |i: usize, j: usize| {
                 let mut k = outer(dv[i], dv[j], c);
                 if let Some(hv) = &second {
@@ -502,7 +543,11 @@ fn assemble(model: &FaceModel, pose: &Pose, x: &[V3], ws: &mut Workspace, hessia
         if gap < 0.0 {
             add_grad(g, c.node, normal, tp.skull_contact_stiffness * gap);
             if hessian {
-                add_diag(h, c.node, &outer(normal, normal, tp.skull_contact_stiffness));
+                add_diag(
+                    h,
+                    c.node,
+                    &outer(normal, normal, tp.skull_contact_stiffness),
+                );
             }
         }
     }
@@ -617,7 +662,11 @@ fn newton(
         for (s, g) in ws.step.iter_mut().zip(&ws.gradient) {
             *s = -g;
         }
-        llt.solve_in_place(MatMut::from_column_major_slice_mut(&mut ws.step, ws.pattern.dof, 1));
+        llt.solve_in_place(MatMut::from_column_major_slice_mut(
+            &mut ws.step,
+            ws.pattern.dof,
+            1,
+        ));
         let slope: f64 = ws.step.iter().zip(&ws.gradient).map(|(s, g)| s * g).sum();
         // Backtracking (Armijo) line search on the energy.
         let mut alpha = 1.0;

@@ -99,16 +99,56 @@ pub struct Prism {
     pub rest_volume: f64,
 }
 
-/// The tetrahedra of a prism, as indices into its six nodes. Their signed volumes are all
-/// positive for a valid prism whose top triangle is counter-clockwise seen from outside.
-pub const PRISM_TETS: [[usize; 4]; 3] = [[3, 4, 5, 0], [4, 5, 0, 1], [5, 0, 1, 2]];
+/// The tetrahedra of a prism, as indices into its six nodes (top 0-2, bottom 3-5), all
+/// positively oriented for a valid prism whose top triangle is counter-clockwise seen from
+/// outside. A prism splits into three tetrahedra in six ways (three starting corners, two
+/// orientations); one split depends on the vertex order, so a mirrored face would get a
+/// different volume. The average over all six is order-free (it is the volume of the prism
+/// with bilinear side faces), so `PRISM_TETS` lists all 18, each weighted `1/6`.
+pub const PRISM_TETS: [[usize; 4]; 18] = {
+    let orders = [
+        [0, 1, 2],
+        [1, 2, 0],
+        [2, 0, 1],
+        [0, 2, 1],
+        [2, 1, 0],
+        [1, 0, 2],
+    ];
+    let mut out = [[0; 4]; 18];
+    let mut o = 0;
+    while o < 6 {
+        let [i, j, k] = orders[o];
+        let mut tets = [
+            [i + 3, j + 3, k + 3, i],
+            [j + 3, k + 3, i, j],
+            [k + 3, i, j, k],
+        ];
+        let mut t = 0;
+        while t < 3 {
+            if o >= 3 {
+                // The reversed order gives negatively oriented tetrahedra: swap two corners.
+                let first = tets[t][0];
+                tets[t][0] = tets[t][1];
+                tets[t][1] = first;
+            }
+            out[3 * o + t] = tets[t];
+            t += 1;
+        }
+        o += 1;
+    }
+    out
+};
+
+/// Weight of each of the `PRISM_TETS` in the prism volume.
+pub const PRISM_TET_WEIGHT: f64 = 1.0 / 6.0;
 
 /// Signed volume of a prism from its six node positions.
 pub fn prism_volume(p: &[V3; 6]) -> f64 {
-    PRISM_TETS
-        .iter()
-        .map(|t| tet_volume(p[t[0]], p[t[1]], p[t[2]], p[t[3]]))
-        .sum()
+    PRISM_TET_WEIGHT
+        * PRISM_TETS
+            .iter()
+            .map(|t| tet_volume(p[t[0]], p[t[1]], p[t[2]], p[t[3]]))
+            .sum::<f64>()
 }
 
 /// Smallest signed tetrahedron volume of a prism: negative means the element is inverted.
@@ -146,7 +186,9 @@ impl Tissue {
             0.0,
             params.epidermis_thickness,
             params.epidermis_thickness + params.dermal_fatty_thickness,
-            params.epidermis_thickness + params.dermal_fatty_thickness + params.muscle_layer_thickness,
+            params.epidermis_thickness
+                + params.dermal_fatty_thickness
+                + params.muscle_layer_thickness,
         ];
         let neighbours = mesh.neighbours();
         let mut thickness_scale = vec![1.0; n];
@@ -189,7 +231,10 @@ impl Tissue {
             }
             let smoothed: Vec<f64> = (0..n)
                 .map(|v| {
-                    let mean = neighbours[v].iter().map(|&u| thickness_scale[u]).sum::<f64>()
+                    let mean = neighbours[v]
+                        .iter()
+                        .map(|&u| thickness_scale[u])
+                        .sum::<f64>()
                         / neighbours[v].len().max(1) as f64;
                     thickness_scale[v].min(mean * 1.15)
                 })
@@ -223,7 +268,13 @@ impl Tissue {
                 let k = 0.5 * modulus * h;
                 add_spring(&mut springs, slab * n + a, slab * n + b, k, slab == SURFACE);
                 if slab + 1 < SKULL {
-                    add_spring(&mut springs, (slab + 1) * n + a, (slab + 1) * n + b, k, false);
+                    add_spring(
+                        &mut springs,
+                        (slab + 1) * n + a,
+                        (slab + 1) * n + b,
+                        k,
+                        false,
+                    );
                 }
                 // Crossing springs resist shear of the slab.
                 let kc = params.crossing_fraction * k;
@@ -233,11 +284,17 @@ impl Tissue {
             // Vertical springs: a column of area A and height h has stiffness E A / h.
             for v in 0..n {
                 let h = nominal * thickness_scale[v];
-                add_spring(&mut springs, slab * n + v, (slab + 1) * n + v, modulus * areas[v] / h, false);
+                add_spring(
+                    &mut springs,
+                    slab * n + v,
+                    (slab + 1) * n + v,
+                    modulus * areas[v] / h,
+                    false,
+                );
             }
         }
         // Merge duplicate in-sheet springs (a sheet gets one from the slab above and below).
-        springs.sort_by(|x, y| x.nodes.cmp(&y.nodes));
+        springs.sort_by_key(|s| s.nodes);
         let mut merged: Vec<Spring> = Vec::with_capacity(springs.len());
         for s in springs {
             match merged.last_mut() {
@@ -262,7 +319,9 @@ impl Tissue {
                 // near nothing (the commissures and the inner lips) the muscle layer keeps its
                 // springs but no volume element, so the lips can slide over the teeth.
                 let lip = slab == SKULL - 1
-                    && tri.iter().any(|&v| thickness_scale[v] < LIP_THICKNESS_SCALE);
+                    && tri
+                        .iter()
+                        .any(|&v| thickness_scale[v] < LIP_THICKNESS_SCALE);
                 if lip || prism_min_tet_volume(&p) <= 0.0 {
                     degenerate_prisms += 1;
                     continue;
@@ -341,7 +400,10 @@ fn smoothed_normals(mesh: &Mesh, passes: usize) -> Vec<V3> {
             incident[v]
                 .iter()
                 .map(|&n| (super::geom::dot(n, d), n))
-                .fold((f64::INFINITY, [0.0; 3]), |a, b| if b.0 < a.0 { b } else { a })
+                .fold(
+                    (f64::INFINITY, [0.0; 3]),
+                    |a, b| if b.0 < a.0 { b } else { a },
+                )
         };
         if worst(normals[v]).0 >= MIN_NORMAL_COSINE {
             continue;
@@ -368,7 +430,7 @@ fn smoothed_normals(mesh: &Mesh, passes: usize) -> Vec<V3> {
 }
 
 /// Below this thickness scale a vertex counts as lip tissue, not bound to bone.
-const LIP_THICKNESS_SCALE: f64 = 0.3;
+pub const LIP_THICKNESS_SCALE: f64 = 0.3;
 
 /// Thinning stops here: a flatter prism only becomes numerically degenerate.
 const MIN_THICKNESS_SCALE: f64 = 0.1;
