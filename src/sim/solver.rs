@@ -592,6 +592,18 @@ fn assemble(
     }
 }
 
+/// The rest positions with the fixed nodes where `pose` puts them: the reference state whose
+/// force imbalance scales the residual.
+fn rest_under(model: &FaceModel, pose: &Pose) -> Vec<V3> {
+    let mut rest = model.tissue.rest.clone();
+    for (node, p) in rest.iter_mut().enumerate() {
+        if !model.free[node] {
+            *p = pose.fixed[node];
+        }
+    }
+    rest
+}
+
 fn gradient_norm(ws: &Workspace) -> f64 {
     ws.gradient.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
@@ -605,12 +617,7 @@ fn newton(
     params: &SolveParams,
 ) -> Result<SolveReport, SolveError> {
     // Scale: the force imbalance of the rest positions under this pose.
-    let mut rest = model.tissue.rest.clone();
-    for (node, p) in rest.iter_mut().enumerate() {
-        if !model.free[node] {
-            *p = pose.fixed[node];
-        }
-    }
+    let rest = rest_under(model, pose);
     assemble(model, pose, &rest, ws, false, false);
     let scale_norm = gradient_norm(ws);
     if !scale_norm.is_finite() {
@@ -788,12 +795,7 @@ pub fn solve_from_rest(
 /// The relative residual of `state` for its own activations (for checking a returned state).
 pub fn residual(model: &FaceModel, state: &State, ws: &mut Workspace) -> f64 {
     let pose = model.pose(&state.activations);
-    let mut rest = model.tissue.rest.clone();
-    for (node, p) in rest.iter_mut().enumerate() {
-        if !model.free[node] {
-            *p = pose.fixed[node];
-        }
-    }
+    let rest = rest_under(model, &pose);
     assemble(model, &pose, &rest, ws, false, false);
     let scale_norm = gradient_norm(ws);
     assemble(model, &pose, &state.positions, ws, false, false);
