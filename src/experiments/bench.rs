@@ -13,7 +13,7 @@ use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::geom::{norm, sub, V3};
-use crate::sim::{solve, solve_from_rest, Activations, FaceModel, SolveParams, Workspace};
+use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 
 /// Random expression activations as the dataset stage draws them: a random expression,
 /// s ~ U[0, 1], jaw rotation ~ U[0, 1].
@@ -55,18 +55,11 @@ pub fn bench_solve(
     let weights = source.weights()?;
     let params = SolveParams::default();
     for &level in levels {
-        let model = FaceModel::new(
-            &crate::io::mesh::read_obj(
-                &source
-                    .mesh
-                    .clone()
-                    .unwrap_or_else(crate::io::mesh::default_mesh_path),
-            )?,
-            crate::sim::FaceParams {
-                subdivisions: level,
-                ..Default::default()
-            },
-        )?;
+        let model = FaceSource {
+            subdivisions: level,
+            ..source.clone()
+        }
+        .model()?;
         let p = format!("solve.nonlinear.sub{level}");
         let n = model.vertex_count();
         line(out, &format!("{p}.surface_vertices"), n as f64, "count")?;
@@ -182,13 +175,10 @@ pub fn bench_solve(
             max * 1e3,
             "mm",
         )?;
-        let motion: f64 = batch
+        let rest = model.rest_state();
+        let motion: f64 = states
             .iter()
-            .zip(&states)
-            .map(|(_, s)| {
-                let rest = model.rest_state();
-                landmark_error(s.surface(n), rest.surface(n)).0
-            })
+            .map(|s| landmark_error(s.surface(n), rest.surface(n)).0)
             .sum::<f64>()
             / count as f64;
         line(

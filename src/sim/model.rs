@@ -123,7 +123,7 @@ impl FaceModel {
             }
         }
 
-        let mouth_centre = mean_of(&rig.mouth, &surface.positions);
+        let mouth_centre = super::rig::mean(rig.mouth.iter().map(|&v| surface.positions[v]));
         let mut muscles = Vec::with_capacity(2 * MUSCLE_PAIRS.len());
         for pair in 0..MUSCLE_PAIRS.len() {
             for side in [Side::Left, Side::Right] {
@@ -295,12 +295,4 @@ impl FaceModel {
             .map(|v| norm(sub(state.positions[v], self.tissue.rest[v])))
             .fold(0.0, f64::max)
     }
-}
-
-fn mean_of(vertices: &[usize], positions: &[V3]) -> V3 {
-    let mut sum = [0.0; 3];
-    for &v in vertices {
-        sum = super::geom::add(sum, positions[v]);
-    }
-    super::geom::scale(sum, 1.0 / vertices.len() as f64)
 }

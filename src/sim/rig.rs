@@ -139,7 +139,8 @@ pub enum RigError {
     LoopCount(usize),
 }
 
-fn mean(points: impl Iterator<Item = V3>) -> V3 {
+/// Mean of a set of points.
+pub fn mean(points: impl Iterator<Item = V3>) -> V3 {
     let mut sum = [0.0; 3];
     let mut count = 0usize;
     for p in points {
