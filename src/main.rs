@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use facelab::experiments::bench::bench_solve;
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
 use facelab::report::render::{Camera, RenderOptions};
+use facelab::sim::SolveParams;
 
 #[derive(Parser)]
 #[command(
@@ -108,6 +109,9 @@ enum Bench {
         /// Subdivision levels to measure
         #[arg(long, value_delimiter = ',', default_value = "0,1")]
         levels: Vec<u8>,
+        /// Relative residual at which a solve has converged
+        #[arg(long, default_value_t = SolveParams::default().tolerance)]
+        tolerance: f64,
     },
 }
 
@@ -156,11 +160,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 samples,
                 seed,
                 levels,
+                tolerance,
             } => bench_solve(
                 &face.source(),
                 &levels,
                 samples,
                 seed,
+                &SolveParams {
+                    tolerance,
+                    ..SolveParams::default()
+                },
                 &mut std::io::stdout().lock(),
             )?,
         },

@@ -13,6 +13,7 @@ use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::geom::{norm, sub, V3};
+use crate::sim::solver::solve_predicted;
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 
 /// Random expression activations as the dataset stage draws them: a random expression,
@@ -50,10 +51,11 @@ pub fn bench_solve(
     levels: &[u8],
     samples: usize,
     seed: u64,
+    params: &SolveParams,
     out: &mut impl Write,
 ) -> Result<()> {
     let weights = source.weights()?;
-    let params = SolveParams::default();
+    let params = *params;
     for &level in levels {
         let model = FaceSource {
             subdivisions: level,
@@ -131,7 +133,7 @@ pub fn bench_solve(
             "count",
         )?;
 
-        // Linear basis.
+        // Linear basis, and solves started from its prediction.
         let t = Instant::now();
         let basis = LinearBasis::build(&model, &params)?;
         line(
@@ -140,6 +142,56 @@ pub fn bench_solve(
             t.elapsed().as_secs_f64(),
             "s",
         )?;
+        let mut predicted_iterations = 0;
+        let mut predicted_states = Vec::with_capacity(count);
+        let t = Instant::now();
+        for a in &batch {
+            let (state, r) = solve_predicted(&model, &basis, a, &mut ws, &params)?;
+            predicted_iterations += r.iterations;
+            predicted_states.push(state);
+        }
+        let predicted = t.elapsed().as_secs_f64() / count as f64;
+        line(
+            out,
+            &format!("{p}.predicted_ms_per_sample"),
+            predicted * 1e3,
+            "ms",
+        )?;
+        line(
+            out,
+            &format!("{p}.predicted_iterations_per_sample"),
+            predicted_iterations as f64 / count as f64,
+            "count",
+        )?;
+        let mut apart = 0.0f64;
+        for (a, b) in predicted_states.iter().zip(&states) {
+            apart = apart.max(landmark_error(a.surface(n), b.surface(n)).1);
+        }
+        line(
+            out,
+            &format!("{p}.predicted_vs_cold_landmark_max_mm"),
+            apart * 1e3,
+            "mm",
+        )?;
+
+        // How far the returned faces are from a 100x tighter solve of the same activations.
+        let tight = SolveParams {
+            tolerance: params.tolerance * 1e-2,
+            ..params
+        };
+        let mut drift = 0.0f64;
+        for s in &states {
+            let mut refined = s.clone();
+            solve(&model, &s.activations, &mut refined, &mut ws, &tight)?;
+            drift = drift.max(landmark_error(refined.surface(n), s.surface(n)).1);
+        }
+        line(
+            out,
+            &format!("{p}.tolerance_landmark_drift_max_mm"),
+            drift * 1e3,
+            "mm",
+        )?;
+
         let mut surface = Vec::new();
         let repeats = 200;
         let t = Instant::now();

@@ -1,33 +1,42 @@
 //! Quasi-static equilibrium of the face: the free node positions minimising the tissue's
 //! elastic energy plus the muscles' potential, for fixed activations.
 //!
-//! Newton's method on the total energy with per-element positive semi-definite Hessians
-//! (compressed springs drop their negative geometric term; volume terms use the Gauss-Newton
-//! part), factorised by faer's sparse supernodal Cholesky with the symbolic factorisation
-//! computed once per model, and a backtracking line search that also refuses steps that
-//! would invert a prism. Measured against projective dynamics and L-BFGS in DESIGN 2.1,
-//! Newton was the fastest warm-started.
+//! Newton's method on the total energy. Each iteration first tries the exact Hessian; where
+//! it is indefinite (compressed springs buckling, prisms past the inflection of their volume
+//! energy) it falls back to the positive semi-definite part (compressive geometric terms and
+//! the volume's second derivative dropped), then to a diagonal shift. The matrix is assembled
+//! in a fill-reducing node order into preallocated slots and factorised by faer's supernodal
+//! Cholesky with the symbolic analysis done once per model; a backtracking (Armijo) line
+//! search refuses steps that would invert a prism. `facelab bench solve` measures it.
 //!
 //! Large changes of activation are reached by continuation: the path from the state's own
 //! activations to the target is split in halves until each piece converges, so a solve from
 //! rest follows the physical loading path and gives the same equilibrium every run.
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
-use faer::{MatMut, Side};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering,
+};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat, SymbolicSparseColMatRef};
+use faer::{Conj, MatMut, Par, Side};
 
+use super::basis::LinearBasis;
 use super::controls::Activations;
-use super::geom::{cross, dot, norm, scale, sub, V3};
+use super::geom::{dot, norm, scale, sub, V3};
 use super::model::{FaceModel, Pose, State};
 use super::muscles::MuscleKind;
-use super::tissue::{prism_volume, PRISM_TETS, PRISM_TET_WEIGHT};
+use super::tissue::{prism_volume, prism_volume_derivatives};
 
 /// Solver settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolveParams {
     /// Converged when |gradient| <= tolerance * |gradient at the rest positions| for the same
-    /// activations (the force imbalance the solve removes). Default 1e-6.
+    /// activations (the force imbalance the solve removes). Default 1e-4: `bench solve`
+    /// measures how far a 100x tighter solve moves the landmarks from there (about 0.02 mm
+    /// at most, against ~4 mm of expression motion).
     pub tolerance: f64,
     /// Newton iterations allowed per continuation piece. Default 30.
     pub max_iterations: usize,
@@ -40,7 +49,7 @@ pub struct SolveParams {
 impl Default for SolveParams {
     fn default() -> Self {
         SolveParams {
-            tolerance: 1e-6,
+            tolerance: 1e-4,
             max_iterations: 30,
             continuation_steps: 4,
             max_halvings: 6,
@@ -77,12 +86,16 @@ const NONE: u32 = u32::MAX;
 
 /// Sparse structure of the Hessian over free degrees of freedom (lower triangle, CSC) and
 /// where each element's blocks land in it.
+///
+/// Free nodes are numbered in an approximate-minimum-degree order of the node graph, so the
+/// matrix is assembled already in fill-reducing order: the Cholesky factorisation needs no
+/// permutation, and each node's three coordinates stay together in one supernode.
 struct Pattern {
     dof: usize,
-    /// Free index of each node, or NONE.
+    /// Free index of each node (in elimination order), or NONE.
     free_index: Vec<u32>,
     symbolic: SymbolicSparseColMat<usize>,
-    llt: SymbolicLlt<usize>,
+    cholesky: SymbolicCholesky<usize>,
     /// Per free node: slots of its diagonal block (upper entries NONE).
     diag: Vec<[u32; 9]>,
     /// Per spring: slots of the (a, b) off-diagonal block, row = larger free index.
@@ -107,6 +120,56 @@ const PRISM_PAIRS: [(usize, usize); 15] = {
     out
 };
 
+/// Pairs of nodes coupled by an element.
+fn element_links(model: &FaceModel) -> impl Iterator<Item = (usize, usize)> + '_ {
+    let springs = model
+        .tissue
+        .springs
+        .iter()
+        .map(|s| (s.nodes[0], s.nodes[1]));
+    let prisms = model
+        .tissue
+        .prisms
+        .iter()
+        .flat_map(|p| PRISM_PAIRS.map(|(i, j)| (p.nodes[i], p.nodes[j])));
+    springs.chain(prisms)
+}
+
+/// An approximate minimum degree order of the free nodes: `order[old] = new`, where `old`
+/// numbers the free nodes in node order.
+fn node_order(model: &FaceModel, old_index: &[u32], nf: usize) -> Vec<u32> {
+    let mut adj: Vec<Vec<usize>> = vec![Vec::new(); nf];
+    for (a, b) in element_links(model) {
+        let (fa, fb) = (old_index[a], old_index[b]);
+        if fa != NONE && fb != NONE && fa != fb {
+            adj[fa as usize].push(fb as usize);
+            adj[fb as usize].push(fa as usize);
+        }
+    }
+    let mut col_ptr = vec![0usize];
+    let mut row_idx = Vec::new();
+    for rows in &mut adj {
+        rows.sort_unstable();
+        rows.dedup();
+        row_idx.extend_from_slice(rows);
+        col_ptr.push(row_idx.len());
+    }
+    let nnz = row_idx.len();
+    let graph = SymbolicSparseColMat::new_checked(nf, nf, col_ptr, None, row_idx);
+    let mut perm = vec![0usize; nf];
+    let mut perm_inv = vec![0usize; nf];
+    let mut buffer = MemBuffer::new(amd::order_scratch::<usize>(nf, nnz));
+    amd::order(
+        &mut perm,
+        &mut perm_inv,
+        graph.as_ref(),
+        amd::Control::default(),
+        MemStack::new(&mut buffer),
+    )
+    .expect("AMD ordering of the tissue graph");
+    perm_inv.iter().map(|&n| n as u32).collect()
+}
+
 impl Pattern {
     fn new(model: &FaceModel) -> Pattern {
         let mut free_index = vec![NONE; model.node_count()];
@@ -118,22 +181,17 @@ impl Pattern {
             }
         }
         let nf = count as usize;
+        let order = node_order(model, &free_index, nf);
+        for f in free_index.iter_mut().filter(|f| **f != NONE) {
+            *f = order[*f as usize];
+        }
         let dof = 3 * nf;
         // Node adjacency (lower: row node >= column node).
         let mut adj: Vec<Vec<u32>> = (0..nf as u32).map(|f| vec![f]).collect();
-        let mut link = |a: usize, b: usize| {
+        for (a, b) in element_links(model) {
             let (fa, fb) = (free_index[a], free_index[b]);
             if fa != NONE && fb != NONE && fa != fb {
-                let (hi, lo) = (fa.max(fb), fa.min(fb));
-                adj[lo as usize].push(hi);
-            }
-        };
-        for s in &model.tissue.springs {
-            link(s.nodes[0], s.nodes[1]);
-        }
-        for p in &model.tissue.prisms {
-            for &(i, j) in &PRISM_PAIRS {
-                link(p.nodes[i], p.nodes[j]);
+                adj[fa.min(fb) as usize].push(fa.max(fb));
             }
         }
         for a in &mut adj {
@@ -201,25 +259,58 @@ impl Pattern {
             .iter()
             .map(|p| PRISM_PAIRS.map(|(i, j)| pair_block(p.nodes[i], p.nodes[j])))
             .collect();
+        // The symbolic analysis without a permutation reads the upper triangle: the same
+        // pattern transposed. The numeric factorisation then takes the lower values as they are.
+        let mut upper_ptr = vec![0usize; dof + 1];
+        for &row in &row_idx {
+            upper_ptr[row + 1] += 1;
+        }
+        for c in 0..dof {
+            upper_ptr[c + 1] += upper_ptr[c];
+        }
+        let mut upper_idx = vec![0usize; row_idx.len()];
+        let mut next = upper_ptr.clone();
+        for col in 0..dof {
+            for &row in &row_idx[col_ptr[col]..col_ptr[col + 1]] {
+                upper_idx[next[row]] = col;
+                next[row] += 1;
+            }
+        }
+        let upper = SymbolicSparseColMat::new_checked(dof, dof, upper_ptr, None, upper_idx);
         let symbolic = SymbolicSparseColMat::new_checked(dof, dof, col_ptr, None, row_idx);
-        let llt = SymbolicLlt::try_new(symbolic.as_ref(), Side::Lower)
-            .expect("symbolic Cholesky of the tissue pattern");
+        let cholesky = factorize_symbolic_cholesky(
+            upper.as_ref(),
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            },
+        )
+        .expect("symbolic Cholesky of the tissue pattern");
         Pattern {
             dof,
             free_index,
             symbolic,
-            llt,
+            cholesky,
             diag,
             spring_off,
             prism_off,
         }
     }
+
+    fn matrix_pattern(&self) -> SymbolicSparseColMatRef<'_, usize> {
+        self.symbolic.as_ref()
+    }
 }
 
-/// Scratch memory for solving one model, owned by the caller and reused across solves.
+/// Scratch memory for solving one model, owned by the caller and reused across solves: no
+/// allocation happens inside a Newton iteration.
 pub struct Workspace {
     pattern: Pattern,
     values: Vec<f64>,
+    factor: Vec<f64>,
+    stack: MemBuffer,
     gradient: Vec<f64>,
     step: Vec<f64>,
     trial: Vec<V3>,
@@ -230,18 +321,54 @@ impl Workspace {
         let pattern = Pattern::new(model);
         let nnz = pattern.symbolic.row_idx().len();
         let dof = pattern.dof;
+        let chol = &pattern.cholesky;
+        let req = StackReq::any_of(&[
+            chol.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+            chol.solve_in_place_scratch::<f64>(1, Par::Seq),
+        ]);
         Workspace {
-            pattern,
             values: vec![0.0; nnz],
+            factor: vec![0.0; chol.len_val()],
+            stack: MemBuffer::new(req),
             gradient: vec![0.0; dof],
             step: vec![0.0; dof],
             trial: Vec::new(),
+            pattern,
         }
     }
 
     /// Free degrees of freedom.
     pub fn dof(&self) -> usize {
         self.pattern.dof
+    }
+
+    /// Factorises the assembled Hessian and overwrites `step` with `-H^-1 gradient`.
+    /// Returns false if the matrix is not positive definite.
+    fn newton_step(&mut self) -> bool {
+        let mat = SparseColMatRef::new(self.pattern.matrix_pattern(), &self.values);
+        let llt = match self.pattern.cholesky.factorize_numeric_llt(
+            &mut self.factor,
+            mat,
+            Side::Lower,
+            LltRegularization::default(),
+            Par::Seq,
+            MemStack::new(&mut self.stack),
+            Default::default(),
+        ) {
+            Ok(llt) => llt,
+            Err(_) => return false,
+        };
+        for (s, g) in self.step.iter_mut().zip(&self.gradient) {
+            *s = -g;
+        }
+        let dof = self.pattern.dof;
+        llt.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut self.step, dof, 1),
+            Par::Seq,
+            MemStack::new(&mut self.stack),
+        );
+        self.step.iter().all(|v| v.is_finite())
     }
 }
 
@@ -294,93 +421,19 @@ fn spring_law(s: &super::tissue::Spring, l: f64, strain: f64, factor: f64) -> (f
     }
 }
 
-/// Gradient of a prism's volume with respect to its six nodes.
-fn prism_volume_gradient(p: &[V3; 6]) -> (f64, [V3; 6]) {
-    let mut g = [[0.0; 3]; 6];
-    let mut volume = 0.0;
-    for t in &PRISM_TETS {
-        let [a, b, c, d] = t.map(|i| p[i]);
-        let (ba, ca, da) = (sub(b, a), sub(c, a), sub(d, a));
-        let w = PRISM_TET_WEIGHT / 6.0;
-        volume += w * dot(cross(ba, ca), da);
-        let gb = scale(cross(ca, da), w);
-        let gc = scale(cross(da, ba), w);
-        let gd = scale(cross(ba, ca), w);
-        let ga = scale(
-            [
-                gb[0] + gc[0] + gd[0],
-                gb[1] + gc[1] + gd[1],
-                gb[2] + gc[2] + gd[2],
-            ],
-            -1.0,
-        );
-        for (k, gk) in [(t[0], ga), (t[1], gb), (t[2], gc), (t[3], gd)] {
-            g[k] = [g[k][0] + gk[0], g[k][1] + gk[1], g[k][2] + gk[2]];
-        }
-    }
-    (volume, g)
-}
-
 /// Weight of the logarithmic barrier in the volume energy: it grows without bound as a
 /// prism's volume goes to zero, so Newton steps see inversion coming instead of being cut
 /// short by the line search.
 const VOLUME_BARRIER: f64 = 0.2;
 
-/// `[e]_x`, the matrix of `v -> e x v`.
+/// `[e]_x s`, the matrix of `v -> s e x v`.
+#[inline]
 fn skew(e: V3, s: f64) -> [[f64; 3]; 3] {
     [
         [0.0, -s * e[2], s * e[1]],
         [s * e[2], 0.0, -s * e[0]],
         [-s * e[1], s * e[0], 0.0],
     ]
-}
-
-/// Second derivatives of a prism's volume: `h[i][j]` is d2V / dx_i dx_j (3x3).
-/// For a tetrahedron V = det[p1-p0, p2-p0, p3-p0] / 6: d2V/dp1dp2 = -[p3-p0]_x / 6,
-/// d2V/dp1dp3 = [p2-p0]_x / 6, d2V/dp2dp3 = -[p1-p0]_x / 6, transposes below the diagonal,
-/// and the p0 rows and columns minus the sums of the others (translation invariance).
-fn prism_volume_hessian(p: &[V3; 6]) -> [[[[f64; 3]; 3]; 6]; 6] {
-    let mut h = [[[[0.0; 3]; 3]; 6]; 6];
-    for t in &PRISM_TETS {
-        let e = [1, 2, 3].map(|k| sub(p[t[k]], p[t[0]]));
-        let mut local = [[[[0.0; 3]; 3]; 4]; 4];
-        let s = PRISM_TET_WEIGHT / 6.0;
-        local[1][2] = skew(e[2], -s);
-        local[1][3] = skew(e[1], s);
-        local[2][3] = skew(e[0], -s);
-        for (i, j) in [(1, 2), (1, 3), (2, 3)] {
-            let m = local[i][j];
-            local[j][i] = [
-                [m[0][0], m[1][0], m[2][0]],
-                [m[0][1], m[1][1], m[2][1]],
-                [m[0][2], m[1][2], m[2][2]],
-            ];
-        }
-        for j in 1..4 {
-            for r in 0..3 {
-                for c in 0..3 {
-                    let col: f64 = (1..4).map(|i| local[i][j][r][c]).sum();
-                    local[0][j][r][c] = -col;
-                    local[j][0][c][r] = -col;
-                }
-            }
-        }
-        for r in 0..3 {
-            for c in 0..3 {
-                local[0][0][r][c] = -(1..4).map(|j| local[0][j][r][c]).sum::<f64>();
-            }
-        }
-        for a in 0..4 {
-            for b in 0..4 {
-                for r in 0..3 {
-                    for c in 0..3 {
-                        h[t[a]][t[b]][r][c] += local[a][b][r][c];
-                    }
-                }
-            }
-        }
-    }
-    h
 }
 
 /// Total energy at `x` (J), or infinity if a prism is inverted (signed volume <= 0). A prism
@@ -497,10 +550,7 @@ fn assemble(
         }
     }
     for (pi, p) in model.tissue.prisms.iter().enumerate() {
-        let q = p.nodes.map(|i| x[i]);
-        let (_, dv) = prism_volume_gradient(&q);
-        // The volume itself as `prism_volume` sums it, bit for bit as at rest.
-        let v = prism_volume(&q);
+        let (v, dv, hv) = prism_volume_derivatives(&p.nodes.map(|i| x[i]));
         // psi(J) = kappa V0 (0.5 (J - 1)^2 + b (J - 1 - ln J)), J = V / V0:
         // grad = kappa (J - 1 + b (1 - 1/J)) grad V,
         // hess = kappa (1 + b / J^2) / V0 grad V grad V^T + kappa (J - 1 + b (1 - 1/J)) hess V.
@@ -511,29 +561,22 @@ fn assemble(
             add_grad(g, p.nodes[k], dv[k], coef);
         }
         if hessian {
-            // c grad V grad V^T, plus (full) c (V - V0) hess V.
-            let second = if full {
-                Some(prism_volume_hessian(&q))
-            } else {
-                None
-            };
-            let block = |i: usize, j: usize| {
-                let mut k = outer(dv[i], dv[j], c);
-                if let Some(hv) = &second {
-                    for r in 0..3 {
-                        for s in 0..3 {
-                            k[r][s] += coef * hv[i][j][r][s];
+            // c grad V grad V^T, plus (full) coef hess V; hess V has zero diagonal blocks.
+            for k in 0..6 {
+                add_diag(h, p.nodes[k], &outer(dv[k], dv[k], c));
+            }
+            for (slots, &(a, b)) in pat.prism_off[pi].iter().zip(&PRISM_PAIRS) {
+                if slots[0] != NONE {
+                    let mut k = outer(dv[a], dv[b], c);
+                    if full {
+                        let second = skew(hv[a][b], coef);
+                        for r in 0..3 {
+                            for s in 0..3 {
+                                k[r][s] += second[r][s];
+                            }
                         }
                     }
-                }
-                k
-            };
-            for k in 0..6 {
-                add_diag(h, p.nodes[k], &block(k, k));
-            }
-            for (slots, &(i, j)) in pat.prism_off[pi].iter().zip(&PRISM_PAIRS) {
-                if slots[0] != NONE {
-                    add_block(h, slots, &block(i, j), 1.0);
+                    add_block(h, slots, &k, 1.0);
                 }
             }
         }
@@ -649,31 +692,28 @@ fn newton(
         if iteration == params.max_iterations {
             break;
         }
-        // Solve H s = -g; on a (rare) failed factorisation, shift the diagonal and retry.
+        // Solve H s = -g with the full Hessian. Where it is indefinite (compressed springs,
+        // a prism past its volume's inflection), use the positive semi-definite part instead,
+        // and if that is singular, shift its diagonal until it factorises.
+        let mut full = true;
         let mut shift = 0.0;
-        let llt = loop {
-            if shift > 0.0 {
-                for d in &ws.pattern.diag {
-                    for k in [0, 4, 8] {
-                        ws.values[d[k] as usize] += shift;
-                    }
+        while !ws.newton_step() {
+            if full {
+                full = false;
+                assemble(model, pose, x, ws, true, false);
+                continue;
+            }
+            let next = if shift == 0.0 { 1e-3 } else { shift * 100.0 };
+            if next > 1e12 {
+                return Err(SolveError::NonFinite { iteration });
+            }
+            for d in &ws.pattern.diag {
+                for k in [0, 4, 8] {
+                    ws.values[d[k] as usize] += next - shift;
                 }
             }
-            let mat = SparseColMatRef::new(ws.pattern.symbolic.as_ref(), &ws.values);
-            match Llt::try_new_with_symbolic(ws.pattern.llt.clone(), mat, Side::Lower) {
-                Ok(llt) => break llt,
-                Err(_) if shift < 1e12 => shift = if shift == 0.0 { 1e-3 } else { shift * 100.0 },
-                Err(_) => return Err(SolveError::NonFinite { iteration }),
-            }
-        };
-        for (s, g) in ws.step.iter_mut().zip(&ws.gradient) {
-            *s = -g;
+            shift = next;
         }
-        llt.solve_in_place(MatMut::from_column_major_slice_mut(
-            &mut ws.step,
-            ws.pattern.dof,
-            1,
-        ));
         let slope: f64 = ws.step.iter().zip(&ws.gradient).map(|(s, g)| s * g).sum();
         // Backtracking (Armijo) line search on the energy.
         let mut alpha = 1.0;
@@ -792,6 +832,38 @@ pub fn solve_from_rest(
     Ok((state, total))
 }
 
+/// Solves for `target` from the linear basis' prediction of its equilibrium: one Newton solve
+/// at the target, with no continuation, which is what makes sampling many random faces cheap.
+/// If the prediction inverts an element or Newton does not converge from it, falls back to
+/// `solve_from_rest`; the report's iterations include the failed attempt.
+pub fn solve_predicted(
+    model: &FaceModel,
+    basis: &LinearBasis,
+    target: &Activations,
+    ws: &mut Workspace,
+    params: &SolveParams,
+) -> Result<(State, SolveReport), SolveError> {
+    let pose = model.pose(target);
+    let mut positions = basis.predict(target);
+    for (node, p) in positions.iter_mut().enumerate() {
+        if !model.free[node] {
+            *p = pose.fixed[node];
+        }
+    }
+    let mut state = State {
+        positions,
+        activations: target.clone(),
+    };
+    let spent = match newton(model, &pose, &mut state, ws, params) {
+        Ok(report) => return Ok((state, report)),
+        Err(SolveError::NotConverged { iterations, .. }) => iterations,
+        Err(_) => 0,
+    };
+    let (state, mut report) = solve_from_rest(model, target, ws, params)?;
+    report.iterations += spent;
+    Ok((state, report))
+}
+
 /// The relative residual of `state` for its own activations (for checking a returned state).
 pub fn residual(model: &FaceModel, state: &State, ws: &mut Workspace) -> f64 {
     let pose = model.pose(&state.activations);
@@ -803,5 +875,100 @@ pub fn residual(model: &FaceModel, state: &State, ws: &mut Workspace) -> f64 {
         gradient_norm(ws)
     } else {
         gradient_norm(ws) / scale_norm
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::mesh::{default_mesh_path, read_obj};
+    use crate::rng::stream;
+    use crate::sim::model::FaceParams;
+
+    fn model() -> FaceModel {
+        let mesh = read_obj(&default_mesh_path()).unwrap();
+        FaceModel::new(&mesh, FaceParams::default()).unwrap()
+    }
+
+    /// `H v` from the lower-triangle CSC values.
+    fn hess_mul(ws: &Workspace, v: &[f64]) -> Vec<f64> {
+        let sym = ws.pattern.symbolic.as_ref();
+        let (cp, ri) = (sym.col_ptr(), sym.row_idx());
+        let mut out = vec![0.0; v.len()];
+        for col in 0..ws.pattern.dof {
+            for k in cp[col]..cp[col + 1] {
+                let (row, h) = (ri[k], ws.values[k]);
+                out[row] += h * v[col];
+                if row != col {
+                    out[col] += h * v[row];
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn gradient_and_hessian_match_finite_differences() {
+        let m = model();
+        let mut a = Activations::neutral();
+        for (name, v) in [
+            ("zygomaticus_major_left", 0.8),
+            ("orbicularis_oris_upper_left", 0.5),
+            ("orbicularis_oculi_orbital_right", 0.5),
+            ("frontalis_medial_right", 0.6),
+            ("jaw_rotation", 0.4),
+        ] {
+            a.set(name, v).unwrap();
+        }
+        let pose = m.pose(&a);
+        let mut ws = Workspace::new(&m);
+        let mut rng = stream(7, "test/derivatives");
+        let mut x = rest_under(&m, &pose);
+        for (node, p) in x.iter_mut().enumerate() {
+            if m.free[node] {
+                for c in p.iter_mut() {
+                    *c += 2e-5 * rng.normal();
+                }
+            }
+        }
+        let dir: Vec<f64> = (0..ws.dof()).map(|_| rng.normal()).collect();
+        let free_index = ws.pattern.free_index.clone();
+        let moved = |t: f64| {
+            let mut y = x.clone();
+            for (node, p) in y.iter_mut().enumerate() {
+                let f = free_index[node];
+                if f != NONE {
+                    for c in 0..3 {
+                        p[c] += t * dir[3 * f as usize + c];
+                    }
+                }
+            }
+            y
+        };
+        let h = 1e-7;
+        assemble(&m, &pose, &x, &mut ws, true, true);
+        let g0 = ws.gradient.clone();
+        let analytic: f64 = g0.iter().zip(&dir).map(|(g, d)| g * d).sum();
+        let numeric = (energy(&m, &pose, &moved(h)) - energy(&m, &pose, &moved(-h))) / (2.0 * h);
+        assert!(
+            (analytic - numeric).abs() <= 1e-6 * analytic.abs().max(1e-9),
+            "directional derivative {analytic} vs finite difference {numeric}"
+        );
+        let hv = hess_mul(&ws, &dir);
+        assemble(&m, &pose, &moved(h), &mut ws, false, false);
+        let gp = ws.gradient.clone();
+        assemble(&m, &pose, &moved(-h), &mut ws, false, false);
+        let gm = ws.gradient.clone();
+        let mut err = 0.0f64;
+        let mut size = 0.0f64;
+        for i in 0..hv.len() {
+            let fd = (gp[i] - gm[i]) / (2.0 * h);
+            err = err.max((fd - hv[i]).abs());
+            size = size.max(fd.abs());
+        }
+        assert!(
+            err <= 1e-5 * size,
+            "Hessian-vector product off by {err} of {size}"
+        );
     }
 }

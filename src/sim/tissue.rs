@@ -6,7 +6,7 @@
 //!
 //! Units: metres, newtons, pascals. Depends only on `sim::geom` and `sim::mesh`.
 
-use super::geom::{add, norm, normalize, scale, sub, tet_volume, V3};
+use super::geom::{add, cross, dot, norm, normalize, scale, sub, tet_volume, V3};
 use super::mesh::Mesh;
 
 /// The four node sheets, outermost first. Node index = `sheet * vertex_count + vertex`.
@@ -142,13 +142,78 @@ pub const PRISM_TETS: [[usize; 4]; 18] = {
 /// Weight of each of the `PRISM_TETS` in the prism volume.
 pub const PRISM_TET_WEIGHT: f64 = 1.0 / 6.0;
 
-/// Signed volume of a prism from its six node positions.
+/// The prism volume is a homogeneous cubic in the node positions, so its Hessian is linear in
+/// them: block (i, j) is the cross-product matrix `[q_ij]_x` with
+/// `q_ij = sum_k PRISM_Q[i][j][k] p_k / 36` (1/36 = split weight 1/6 times the tetrahedron's
+/// 1/6). Built from the expansion of each tetrahedron's `det[b-a, c-a, d-a]` into the triple
+/// products `[b,c,d] - [a,c,d] - [b,a,d] - [b,c,a]`; a triple product `[x,y,z] = x . (y x z)`
+/// has Hessian blocks `(x,y) = -[z]_x`, `(x,z) = [y]_x`, `(y,z) = -[x]_x`.
+pub const PRISM_Q: [[[i32; 6]; 6]; 6] = {
+    let mut c = [[[0i32; 6]; 6]; 6];
+    let mut t = 0;
+    while t < 18 {
+        let [a, b, cc, d] = PRISM_TETS[t];
+        let triples = [(1, b, cc, d), (-1, a, cc, d), (-1, b, a, d), (-1, b, cc, a)];
+        let mut k = 0;
+        while k < 4 {
+            let (sign, x, y, z) = triples[k];
+            // (x, y) += -sign z, (x, z) += sign y, (y, z) += -sign x; (j, i) = -(i, j).
+            let terms = [(x, y, z, -sign), (x, z, y, sign), (y, z, x, -sign)];
+            let mut m = 0;
+            while m < 3 {
+                let (i, j, node, v) = terms[m];
+                c[i][j][node] += v;
+                c[j][i][node] -= v;
+                m += 1;
+            }
+            k += 1;
+        }
+        t += 1;
+    }
+    c
+};
+
+/// Volume, gradient and Hessian vectors of a prism: `(V, dV/dp_i, q_ij)` with
+/// `d2V / dp_i dp_j = [q_ij]_x` (zero for i = j). Positions are taken relative to node 0 (the
+/// volume is translation invariant), which keeps the cubic terms small; then Euler's theorem
+/// for homogeneous forms gives `grad V = H r / 2` and `V = r . grad V / 3`.
+pub fn prism_volume_derivatives(p: &[V3; 6]) -> (f64, [V3; 6], [[V3; 6]; 6]) {
+    let r = p.map(|x| sub(x, p[0]));
+    let mut q = [[[0.0; 3]; 6]; 6];
+    for i in 0..6 {
+        for j in (i + 1)..6 {
+            let mut v = [0.0; 3];
+            for (k, rk) in r.iter().enumerate().skip(1) {
+                let c = PRISM_Q[i][j][k];
+                if c != 0 {
+                    let c = c as f64 / 36.0;
+                    v = [v[0] + c * rk[0], v[1] + c * rk[1], v[2] + c * rk[2]];
+                }
+            }
+            q[i][j] = v;
+            q[j][i] = [-v[0], -v[1], -v[2]];
+        }
+    }
+    let mut g = [[0.0; 3]; 6];
+    let mut volume = 0.0;
+    for i in 0..6 {
+        let mut gi = [0.0; 3];
+        for j in 1..6 {
+            if j != i {
+                let c = cross(q[i][j], r[j]);
+                gi = [gi[0] + c[0], gi[1] + c[1], gi[2] + c[2]];
+            }
+        }
+        g[i] = [0.5 * gi[0], 0.5 * gi[1], 0.5 * gi[2]];
+        volume += dot(g[i], r[i]);
+    }
+    (volume / 3.0, g, q)
+}
+
+/// Signed volume of a prism from its six node positions: the mean of its six splits into
+/// three tetrahedra (see `PRISM_TETS`).
 pub fn prism_volume(p: &[V3; 6]) -> f64 {
-    PRISM_TET_WEIGHT
-        * PRISM_TETS
-            .iter()
-            .map(|t| tet_volume(p[t[0]], p[t[1]], p[t[2]], p[t[3]]))
-            .sum::<f64>()
+    prism_volume_derivatives(p).0
 }
 
 /// Smallest signed tetrahedron volume of a prism: negative means the element is inverted.
@@ -437,3 +502,62 @@ const MIN_THICKNESS_SCALE: f64 = 0.1;
 
 /// Smallest cosine allowed between a vertex's offset direction and its triangles' normals.
 const MIN_NORMAL_COSINE: f64 = 0.35;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn skewed_prism() -> [V3; 6] {
+        [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.1, 0.0],
+            [0.2, 0.9, 0.1],
+            [0.1, -0.05, -0.8],
+            [0.9, 0.2, -0.7],
+            [0.3, 0.7, -0.9],
+        ]
+        .map(|v| add(v, [3.0, -2.0, 5.0]))
+    }
+
+    #[test]
+    fn closed_form_volume_is_the_mean_of_the_eighteen_tetrahedra() {
+        let p = skewed_prism();
+        let tets: f64 = PRISM_TETS
+            .iter()
+            .map(|t| tet_volume(p[t[0]], p[t[1]], p[t[2]], p[t[3]]))
+            .sum::<f64>()
+            * PRISM_TET_WEIGHT;
+        let v = prism_volume(&p);
+        assert!((v - tets).abs() < 1e-12, "{v} vs {tets}");
+        assert!(v > 0.2, "a positive prism: {v}");
+    }
+
+    #[test]
+    fn volume_derivatives_match_finite_differences() {
+        let p = skewed_prism();
+        let (_, g, q) = prism_volume_derivatives(&p);
+        let h = 1e-6;
+        for i in 0..6 {
+            for c in 0..3 {
+                let mut plus = p;
+                let mut minus = p;
+                plus[i][c] += h;
+                minus[i][c] -= h;
+                let fd = (prism_volume(&plus) - prism_volume(&minus)) / (2.0 * h);
+                assert!((fd - g[i][c]).abs() < 1e-8, "dV/dp{i}[{c}]");
+                let (_, gp, _) = prism_volume_derivatives(&plus);
+                let (_, gm, _) = prism_volume_derivatives(&minus);
+                for j in 0..6 {
+                    // Column c of block (j, i) is d(grad_j)/d(p_i[c]) = [q_ji]_x e_c.
+                    let mut unit = [0.0; 3];
+                    unit[c] = 1.0;
+                    let expect = cross(q[j][i], unit);
+                    for r in 0..3 {
+                        let fd = (gp[j][r] - gm[j][r]) / (2.0 * h);
+                        assert!((fd - expect[r]).abs() < 1e-7, "H[{j}][{i}]({r},{c})");
+                    }
+                }
+            }
+        }
+    }
+}
