@@ -6,8 +6,12 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
-use facelab::experiments::bench::bench_solve;
+use anyhow::Context;
+use facelab::experiments::bench::{bench_observe, bench_solve};
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
+use facelab::experiments::observe;
+use facelab::io::atomic::write_atomic;
+use facelab::io::calibration::default_calibration_path;
 use facelab::report::render::{Camera, RenderOptions};
 use facelab::sim::SolveParams;
 
@@ -88,6 +92,39 @@ enum Command {
         #[arg(long, default_value = "figures/face")]
         out: PathBuf,
     },
+    /// Read the 17 OpenFace AUs: of the simulated face (--expression/--activation), of a
+    /// real OpenFace file's 3D landmarks (--openface), or recompute the AU gains (--calibrate).
+    Observe {
+        #[command(flatten)]
+        face: FaceArgs,
+        /// AU calibration table [default: experiments/au_calibration.csv]
+        #[arg(long)]
+        calibration: Option<PathBuf>,
+        /// Recompute `raw` and `gain` of the calibration table from the model and rewrite it
+        #[arg(long)]
+        calibrate: bool,
+        /// joy, sadness, anger, fear, disgust or surprise
+        #[arg(long)]
+        expression: Option<String>,
+        /// Expression scale s in [0, 1]
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        /// Activations, e.g. zygomaticus_major_left=0.7
+        #[arg(long)]
+        activation: Option<String>,
+        /// Jaw rotation in [0, 1]
+        #[arg(long)]
+        jaw_rotation: Option<f64>,
+        /// An OpenFace CSV with 3D landmarks to observe
+        #[arg(long, requires = "out")]
+        openface: Option<PathBuf>,
+        /// The neutral face: this frame's landmarks [default: the per-landmark median]
+        #[arg(long)]
+        neutral_frame: Option<i64>,
+        /// Where to write our AUs (OpenFace layout) for --openface
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Benchmarks (run with --release).
     Bench {
         #[command(subcommand)]
@@ -112,6 +149,12 @@ enum Bench {
         /// Relative residual at which a solve has converged
         #[arg(long, default_value_t = SolveParams::default().tolerance)]
         tolerance: f64,
+    },
+    /// Observer speed: one face (landmarks + AUs), and reading a large OpenFace file.
+    Observe {
+        /// Frames of the generated OpenFace file (714 columns)
+        #[arg(long, default_value_t = 20_000)]
+        frames: usize,
     },
 }
 
@@ -154,7 +197,56 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let written = gallery(&face.source(), &out)?;
             println!("wrote {} images to {}", written.len(), out.display());
         }
+        Command::Observe {
+            face,
+            calibration,
+            calibrate,
+            expression,
+            scale,
+            activation,
+            jaw_rotation,
+            openface,
+            neutral_frame,
+            out,
+        } => {
+            let path = calibration.unwrap_or_else(default_calibration_path);
+            let table = observe::load_calibration(&path)?;
+            let stdout = &mut std::io::stdout().lock();
+            if calibrate {
+                let updated = observe::calibrate(&face.source(), &table)?;
+                write_atomic(&path, updated.to_csv().as_bytes())
+                    .with_context(|| format!("{}: cannot write", path.display()))?;
+                println!("wrote {}", path.display());
+            } else if let Some(input) = openface {
+                let out = out.expect("clap requires --out with --openface");
+                let neutral = match neutral_frame {
+                    Some(f) => observe::Neutral::Frame(f),
+                    None => observe::Neutral::Median,
+                };
+                let agreement =
+                    observe::observe_openface(&input, &out, neutral, table.calibration())?;
+                observe::print_agreement(&agreement, stdout)?;
+                println!("wrote {}", out.display());
+            } else {
+                let request = PoseRequest {
+                    expression: expression.map(|e| e.parse()).transpose()?,
+                    scale,
+                    activations: activation
+                        .map(|a| parse_assignments(&a))
+                        .transpose()?
+                        .unwrap_or_default(),
+                    jaw_rotation,
+                };
+                let source = face.source();
+                let model = source.model()?;
+                let a = request.activations(&source.weights()?)?;
+                let observer = observe::model_observer(&model, table.calibration())?;
+                let o = observe::observe_activations(&model, &observer, &a)?;
+                observe::print_observation(&o, stdout)?;
+            }
+        }
         Command::Bench { what } => match what {
+            Bench::Observe { frames } => bench_observe(frames, &mut std::io::stdout().lock())?,
             Bench::Solve {
                 face,
                 samples,

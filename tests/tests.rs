@@ -1,6 +1,9 @@
-//! Integration tests, one binary (see STYLE.md): `sim` physics and the command line.
+//! Integration tests, one binary (see STYLE.md): `sim` physics, the
+//! observer, OpenFace files and the command line.
 
 mod cli;
+mod observe;
+mod openface;
 mod sim;
 
 use std::sync::OnceLock;

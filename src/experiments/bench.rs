@@ -243,3 +243,74 @@ pub fn bench_solve(
     }
     Ok(())
 }
+
+/// `facelab bench observe`: observing one face (landmarks + 17 AUs), and reading a full
+/// 714-column OpenFace file of `frames` rows written to a temporary folder.
+pub fn bench_observe(frames: usize, out: &mut impl Write) -> Result<()> {
+    use crate::experiments::observe::model_observer;
+    use crate::io::calibration::{default_calibration_path, read_calibration};
+    use crate::io::openface::{full_header, read_openface};
+
+    let source = FaceSource::default();
+    let model = source.model()?;
+    let weights = source.weights()?;
+    let calibration = read_calibration(&default_calibration_path())?.calibration();
+    let observer = model_observer(&model, calibration)?;
+    let mut ws = Workspace::new(&model);
+    let (state, _) = solve_from_rest(
+        &model,
+        &weights.activations(Expression::Joy, 1.0),
+        &mut ws,
+        &SolveParams::default(),
+    )?;
+    let surface = state.surface(model.vertex_count());
+    let repeats = 20_000;
+    let t = Instant::now();
+    for _ in 0..repeats {
+        let o = observer.observe(&landmarks(std::hint::black_box(surface)))?;
+        std::hint::black_box(o);
+    }
+    let per = t.elapsed().as_secs_f64() / repeats as f64;
+    line(out, "observe.face_us", per * 1e6, "us")?;
+
+    let header = full_header();
+    let mut rng = stream(1, "bench/observe/openface");
+    let mut text = header.join(",");
+    text.push('\n');
+    for f in 0..frames {
+        let mut row = vec![
+            (f + 1).to_string(),
+            "0".into(),
+            format!("{:.3}", f as f64 / 30.0),
+            "0.98".into(),
+            "1".into(),
+        ];
+        row.extend((5..header.len()).map(|_| format!("{:.3}", rng.range(-50.0, 50.0))));
+        text.push_str(&row.join(","));
+        text.push('\n');
+    }
+    let dir = std::env::temp_dir().join(format!("facelab-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let path = dir.join("openface.csv");
+    std::fs::write(&path, &text)?;
+    let t = Instant::now();
+    let file = read_openface(&path)?;
+    let read = t.elapsed().as_secs_f64();
+    std::fs::remove_dir_all(&dir)?;
+    line(
+        out,
+        "observe.openface_columns",
+        header.len() as f64,
+        "count",
+    )?;
+    line(
+        out,
+        "observe.openface_rows",
+        file.rows.len() as f64,
+        "count",
+    )?;
+    line(out, "observe.openface_bytes", text.len() as f64, "bytes")?;
+    line(out, "observe.openface_read_s", read, "s")?;
+    out.flush()?;
+    Ok(())
+}

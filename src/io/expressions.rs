@@ -34,6 +34,28 @@ pub enum ExpressionFileError {
     Header { path: PathBuf, found: String },
 }
 
+/// The control indices a name in a data file stands for: a muscle pair (both sides) or one
+/// control. Unknown names get the nearest valid one suggested.
+pub fn resolve_control(name: &str) -> Result<Vec<usize>, String> {
+    if let Some(pair) = MUSCLE_PAIRS.iter().position(|m| m.name == name) {
+        return Ok([Side::Left, Side::Right]
+            .map(|side| crate::sim::controls::muscle_index(pair, side))
+            .to_vec());
+    }
+    if let Some(index) = control_index(name) {
+        return Ok(vec![index]);
+    }
+    let nearest = MUSCLE_PAIRS
+        .iter()
+        .map(|m| m.name.to_string())
+        .chain(control_names().iter().cloned())
+        .min_by_key(|c| edit_distance(name, c))
+        .unwrap_or_default();
+    Err(format!(
+        "unknown control `{name}` (did you mean `{nearest}`?)"
+    ))
+}
+
 /// Reads W_e for the six expressions.
 pub fn read_expressions(path: &Path) -> Result<ExpressionWeights, ExpressionFileError> {
     let csv_err = |source| ExpressionFileError::Csv {
@@ -76,32 +98,14 @@ pub fn read_expressions(path: &Path) -> Result<ExpressionWeights, ExpressionFile
         if record[3].trim().is_empty() {
             return Err(row_err("every weight needs a reason".to_string()));
         }
-        let control = record[1].trim();
-        if let Some(pair) = MUSCLE_PAIRS.iter().position(|m| m.name == control) {
-            for side in [Side::Left, Side::Right] {
-                weights.set(
-                    expression,
-                    crate::sim::controls::muscle_index(pair, side),
-                    weight,
-                );
-            }
-        } else if let Some(index) = control_index(control) {
+        for index in resolve_control(record[1].trim()).map_err(row_err)? {
             if index == JAW_SLIDE || index == JAW_TWIST {
                 return Err(row_err(format!(
-                    "`{control}` stays neutral (0.5) in expressions (paper 4.2)"
+                    "`{}` stays neutral (0.5) in expressions (paper 4.2)",
+                    record[1].trim()
                 )));
             }
             weights.set(expression, index, weight);
-        } else {
-            let nearest = MUSCLE_PAIRS
-                .iter()
-                .map(|m| m.name.to_string())
-                .chain(control_names().iter().cloned())
-                .min_by_key(|c| edit_distance(control, c))
-                .unwrap_or_default();
-            return Err(row_err(format!(
-                "unknown control `{control}` (did you mean `{nearest}`?)"
-            )));
         }
     }
     Ok(weights)

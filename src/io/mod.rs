@@ -1,5 +1,9 @@
-//! File formats: the face mesh, expression weight tables. The only place that knows file
-//! layouts and column names; every error names the file and line.
+//! File formats: the face mesh, expression weight tables, the AU calibration, OpenFace CSV.
+//! The only place that knows file layouts and column names; every error names the file and
+//! line.
 
+pub mod atomic;
+pub mod calibration;
 pub mod expressions;
 pub mod mesh;
+pub mod openface;

@@ -1,0 +1,463 @@
+//! OpenFace 2.x CSV files (FeatureExtraction, FaceLandmarkVidMulti, FaceLandmarkImg), read
+//! and written with polars. Layout facts in `shared/facs-facts.md` (c):
+//!
+//! - separators `,` (2.2) or `, ` (2.0/2.1, header names then carry a leading space);
+//! - sequence files start `frame[, face_id], timestamp, confidence, success`, image files
+//!   `face, confidence` (no success column: every row counts);
+//! - optional blocks: gaze, eye landmarks, pose (`pose_Tx..pose_Rz`), 2D landmarks
+//!   (`x_0..y_67`), 3D landmarks (`X_0..Z_67`, mm), shape parameters, AU intensities
+//!   (`AUxx_r`, required here) and presence (`AUxx_c`).
+//!
+//! Rows with `success = 0` are skipped and counted. Every error names the file, and where it
+//! applies the line and column.
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use polars::prelude::*;
+
+use crate::observe::{AU_COUNT, AU_NAMES, LANDMARK_COUNT};
+use crate::sim::geom::V3;
+
+/// The field separator of a file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Separator {
+    /// `,` (OpenFace 2.2).
+    Comma,
+    /// `, ` (OpenFace 2.0 and 2.1).
+    CommaSpace,
+}
+
+/// What a file holds, as read from its header.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layout {
+    pub separator: Separator,
+    /// FaceLandmarkImg: rows start `face, confidence`.
+    pub image_mode: bool,
+    pub face_id: bool,
+    pub timestamp: bool,
+    pub pose: bool,
+    pub landmarks_2d: bool,
+    pub landmarks_3d: bool,
+    /// Column names, trimmed.
+    pub columns: Vec<String>,
+}
+
+/// One used row (success = 1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FaceRow {
+    /// Line in the file (1-based, header = 1).
+    pub line: usize,
+    /// `frame` (sequence files) or `face` (image files).
+    pub frame: i64,
+    pub face_id: Option<i64>,
+    pub timestamp: Option<f64>,
+    pub confidence: f64,
+    /// `AUxx_r` in `AU_NAMES` order.
+    pub aus: [f64; AU_COUNT],
+    /// `pose_Tx, Ty, Tz` (mm), `pose_Rx, Ry, Rz` (radians).
+    pub pose: Option<[f64; 6]>,
+    pub landmarks_2d: Option<Box<[[f64; 2]; LANDMARK_COUNT]>>,
+    /// `X_i, Y_i, Z_i` in OpenFace's camera frame (mm; +y down, +z away from the camera).
+    pub landmarks_3d: Option<Box<[V3; LANDMARK_COUNT]>>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpenFaceFile {
+    pub path: PathBuf,
+    pub layout: Layout,
+    pub rows: Vec<FaceRow>,
+    /// Rows with `success = 0`.
+    pub skipped: usize,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum OpenFaceError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: the file is empty")]
+    Empty { path: PathBuf },
+    #[error("{path}:1: unknown separator: the header `{start}` has no commas (OpenFace writes `,` or `, `)")]
+    Separator { path: PathBuf, start: String },
+    #[error("{path}:1: not an OpenFace file: no `frame` or `face` column")]
+    NotOpenFace { path: PathBuf },
+    #[error("{path}:1: missing AU intensity columns: {missing}")]
+    MissingAus { path: PathBuf, missing: String },
+    #[error("{path}:1: column `{column}` appears twice")]
+    Duplicate { path: PathBuf, column: String },
+    #[error("{path}:{line}: column `{column}`: `{cell}` is not a number")]
+    NotNumber {
+        path: PathBuf,
+        line: usize,
+        column: String,
+        cell: String,
+    },
+    #[error("{path}:{line}: column `{column}` is NaN")]
+    NaN {
+        path: PathBuf,
+        line: usize,
+        column: String,
+    },
+    #[error("{path}: {source}")]
+    Polars { path: PathBuf, source: PolarsError },
+}
+
+fn pose_columns() -> [&'static str; 6] {
+    [
+        "pose_Tx", "pose_Ty", "pose_Tz", "pose_Rx", "pose_Ry", "pose_Rz",
+    ]
+}
+
+fn au_column(k: usize) -> String {
+    format!("{}_r", AU_NAMES[k])
+}
+
+/// Reads an OpenFace CSV file.
+pub fn read_openface(path: &Path) -> Result<OpenFaceFile, OpenFaceError> {
+    let bytes = std::fs::read(path).map_err(|source| OpenFaceError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_openface(bytes, path)
+}
+
+/// Parses the bytes of an OpenFace CSV file (`path` only names it in errors).
+pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenFaceError> {
+    let p = || path.to_path_buf();
+    let text_end = bytes
+        .iter()
+        .position(|&b| b == b'\n')
+        .unwrap_or(bytes.len());
+    let header = String::from_utf8_lossy(&bytes[..text_end])
+        .trim_end_matches('\r')
+        .to_string();
+    if bytes.iter().all(|b| b.is_ascii_whitespace()) {
+        return Err(OpenFaceError::Empty { path: p() });
+    }
+    if !header.contains(',') {
+        return Err(OpenFaceError::Separator {
+            path: p(),
+            start: header.chars().take(40).collect(),
+        });
+    }
+    let separator = if header.contains(", ") {
+        Separator::CommaSpace
+    } else {
+        Separator::Comma
+    };
+    // `, ` files: drop the space after every comma so cells and names parse as in 2.2 files.
+    let bytes = match separator {
+        Separator::Comma => bytes,
+        Separator::CommaSpace => {
+            let mut out = Vec::with_capacity(bytes.len());
+            let mut i = 0;
+            while i < bytes.len() {
+                out.push(bytes[i]);
+                if bytes[i] == b',' && bytes.get(i + 1) == Some(&b' ') {
+                    i += 1;
+                }
+                i += 1;
+            }
+            out
+        }
+    };
+    let columns: Vec<String> = header.split(',').map(|c| c.trim().to_string()).collect();
+    let has = |name: &str| columns.iter().any(|c| c == name);
+    for (i, c) in columns.iter().enumerate() {
+        if columns[..i].contains(c) {
+            return Err(OpenFaceError::Duplicate {
+                path: p(),
+                column: c.clone(),
+            });
+        }
+    }
+    let image_mode = !has("frame") && has("face");
+    if !has("frame") && !image_mode {
+        return Err(OpenFaceError::NotOpenFace { path: p() });
+    }
+    let missing: Vec<String> = (0..AU_COUNT).map(au_column).filter(|c| !has(c)).collect();
+    if !missing.is_empty() {
+        return Err(OpenFaceError::MissingAus {
+            path: p(),
+            missing: missing.join(", "),
+        });
+    }
+    let landmark_names = |axes: &[&str]| -> Vec<String> {
+        axes.iter()
+            .flat_map(|a| (0..LANDMARK_COUNT).map(move |i| format!("{a}_{i}")))
+            .collect()
+    };
+    let l2 = landmark_names(&["x", "y"]);
+    let l3 = landmark_names(&["X", "Y", "Z"]);
+    let layout = Layout {
+        separator,
+        image_mode,
+        face_id: has("face_id"),
+        timestamp: has("timestamp"),
+        pose: pose_columns().iter().all(|c| has(c)),
+        landmarks_2d: l2.iter().all(|c| has(c)),
+        landmarks_3d: l3.iter().all(|c| has(c)),
+        columns: columns.clone(),
+    };
+
+    // The columns we use, all read as Float64; cells that do not parse become null and are
+    // reported below with their line and text.
+    let mut wanted: Vec<String> = vec![if image_mode { "face" } else { "frame" }.to_string()];
+    for (flag, name) in [
+        (layout.face_id, "face_id"),
+        (layout.timestamp, "timestamp"),
+        (has("confidence"), "confidence"),
+        (has("success"), "success"),
+    ] {
+        if flag {
+            wanted.push(name.to_string());
+        }
+    }
+    wanted.extend((0..AU_COUNT).map(au_column));
+    if layout.pose {
+        wanted.extend(pose_columns().iter().map(|s| s.to_string()));
+    }
+    if layout.landmarks_2d {
+        wanted.extend(l2.iter().cloned());
+    }
+    if layout.landmarks_3d {
+        wanted.extend(l3.iter().cloned());
+    }
+    let schema: Schema = columns
+        .iter()
+        .map(|c| {
+            let dtype = if wanted.contains(c) {
+                DataType::Float64
+            } else {
+                DataType::String
+            };
+            Field::new(c.as_str().into(), dtype)
+        })
+        .collect();
+    let df = CsvReadOptions::default()
+        .with_has_header(true)
+        .with_schema(Some(Arc::new(schema)))
+        .with_columns(Some(wanted.iter().map(|s| s.as_str().into()).collect()))
+        .with_ignore_errors(true)
+        .with_parse_options(CsvParseOptions::default().with_truncate_ragged_lines(false))
+        .into_reader_with_file_handle(Cursor::new(bytes.as_slice()))
+        .finish()
+        .map_err(|source| OpenFaceError::Polars { path: p(), source })?;
+
+    let column = |name: &str| -> Result<Vec<Option<f64>>, OpenFaceError> {
+        let series = df
+            .column(name)
+            .map_err(|source| OpenFaceError::Polars { path: p(), source })?;
+        let values = series
+            .f64()
+            .map_err(|source| OpenFaceError::Polars { path: p(), source })?;
+        Ok(values
+            .downcast_iter()
+            .flat_map(|arr| arr.iter().map(|v| v.copied()))
+            .collect())
+    };
+    // Line text for error messages (only built when needed).
+    let cell_text = |row: usize, name: &str| -> String {
+        let index = columns.iter().position(|c| c == name).unwrap_or(0);
+        String::from_utf8_lossy(&bytes)
+            .lines()
+            .nth(row + 1)
+            .and_then(|l| l.split(',').nth(index))
+            .unwrap_or("")
+            .trim()
+            .to_string()
+    };
+    let mut data: Vec<(String, Vec<Option<f64>>)> = Vec::with_capacity(wanted.len());
+    for name in &wanted {
+        let values = column(name)?;
+        if let Some(row) = values.iter().position(|v| v.is_none()) {
+            return Err(OpenFaceError::NotNumber {
+                path: p(),
+                line: row + 2,
+                column: name.clone(),
+                cell: cell_text(row, name),
+            });
+        }
+        data.push((name.clone(), values));
+    }
+    let n = df.height();
+    let get = |name: &str, row: usize| -> Option<f64> {
+        data.iter()
+            .find(|(c, _)| c == name)
+            .and_then(|(_, v)| v[row])
+    };
+    let index_of = |name: &str| data.iter().position(|(c, _)| c == name);
+    let au_idx: Vec<usize> = (0..AU_COUNT)
+        .map(|k| index_of(&au_column(k)).expect("AU columns are read"))
+        .collect();
+    let success_idx = index_of("success");
+    let mut rows = Vec::with_capacity(n);
+    let mut skipped = 0;
+    for r in 0..n {
+        if let Some(s) = success_idx {
+            if data[s].1[r] == Some(0.0) {
+                skipped += 1;
+                continue;
+            }
+        }
+        let line = r + 2;
+        let value = |i: usize| -> Result<f64, OpenFaceError> {
+            let v = data[i].1[r].expect("nulls rejected above");
+            if v.is_nan() {
+                return Err(OpenFaceError::NaN {
+                    path: p(),
+                    line,
+                    column: data[i].0.clone(),
+                });
+            }
+            Ok(v)
+        };
+        let mut aus = [0.0; AU_COUNT];
+        for (k, &i) in au_idx.iter().enumerate() {
+            aus[k] = value(i)?;
+        }
+        let frame = value(0)? as i64;
+        let pose = if layout.pose {
+            let mut out = [0.0; 6];
+            for (k, name) in pose_columns().iter().enumerate() {
+                out[k] = value(index_of(name).expect("pose read"))?;
+            }
+            Some(out)
+        } else {
+            None
+        };
+        let landmarks_2d = if layout.landmarks_2d {
+            let base = index_of("x_0").expect("2D landmarks read");
+            let mut out = Box::new([[0.0; 2]; LANDMARK_COUNT]);
+            for i in 0..LANDMARK_COUNT {
+                out[i] = [value(base + i)?, value(base + LANDMARK_COUNT + i)?];
+            }
+            Some(out)
+        } else {
+            None
+        };
+        let landmarks_3d = if layout.landmarks_3d {
+            let base = index_of("X_0").expect("3D landmarks read");
+            let mut out = Box::new([[0.0; 3]; LANDMARK_COUNT]);
+            for i in 0..LANDMARK_COUNT {
+                out[i] = [
+                    value(base + i)?,
+                    value(base + LANDMARK_COUNT + i)?,
+                    value(base + 2 * LANDMARK_COUNT + i)?,
+                ];
+            }
+            Some(out)
+        } else {
+            None
+        };
+        rows.push(FaceRow {
+            line,
+            frame,
+            face_id: get("face_id", r).map(|v| v as i64),
+            timestamp: get("timestamp", r),
+            confidence: get("confidence", r).unwrap_or(1.0),
+            aus,
+            pose,
+            landmarks_2d,
+            landmarks_3d,
+        });
+    }
+    Ok(OpenFaceFile {
+        path: path.to_path_buf(),
+        layout,
+        rows,
+        skipped,
+    })
+}
+
+/// Writes rows as OpenFace 2.2's FeatureExtraction does (`,` separator): `frame, face_id,
+/// timestamp, confidence, success`, the pose block if every row has one, the 3D landmarks if
+/// every row has them, then the 17 `AUxx_r` columns, with OpenFace's decimals (AUs 2, pose
+/// rotation 3, translation and landmarks 1, timestamp 3, confidence 2). The write is atomic.
+pub fn write_openface(path: &Path, rows: &[FaceRow]) -> anyhow::Result<()> {
+    let bytes = openface_bytes(rows)?;
+    crate::io::atomic::write_atomic(path, &bytes)
+        .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", path.display()))
+}
+
+/// The bytes `write_openface` writes.
+pub fn openface_bytes(rows: &[FaceRow]) -> anyhow::Result<Vec<u8>> {
+    let mut cols: Vec<Column> = Vec::new();
+    let mut text = |name: &str, f: &dyn Fn(&FaceRow) -> String| {
+        let values: Vec<String> = rows.iter().map(f).collect();
+        cols.push(Column::new(name.into(), values));
+    };
+    text("frame", &|r| r.frame.to_string());
+    text("face_id", &|r| r.face_id.unwrap_or(0).to_string());
+    text("timestamp", &|r| {
+        format!("{:.3}", r.timestamp.unwrap_or(0.0))
+    });
+    text("confidence", &|r| format!("{:.2}", r.confidence));
+    text("success", &|_| "1".to_string());
+    if !rows.is_empty() && rows.iter().all(|r| r.pose.is_some()) {
+        for (k, name) in pose_columns().iter().enumerate() {
+            let decimals = if k < 3 { 1 } else { 3 };
+            text(name, &|r| {
+                format!("{:.*}", decimals, r.pose.expect("checked")[k])
+            });
+        }
+    }
+    if !rows.is_empty() && rows.iter().all(|r| r.landmarks_3d.is_some()) {
+        for (axis, name) in ["X", "Y", "Z"].iter().enumerate() {
+            for i in 0..LANDMARK_COUNT {
+                text(&format!("{name}_{i}"), &|r| {
+                    format!("{:.1}", r.landmarks_3d.as_ref().expect("checked")[i][axis])
+                });
+            }
+        }
+    }
+    for k in 0..AU_COUNT {
+        text(&au_column(k), &|r| format!("{:.2}", r.aus[k]));
+    }
+    let mut df = DataFrame::new(rows.len(), cols)?;
+    let mut out = Vec::new();
+    CsvWriter::new(&mut out)
+        .include_header(true)
+        .with_quote_style(QuoteStyle::Never)
+        .finish(&mut df)?;
+    Ok(out)
+}
+
+/// The 714 column names of a full OpenFace 2.2 FeatureExtraction file, in order.
+pub fn full_header() -> Vec<String> {
+    let mut h: Vec<String> = ["frame", "face_id", "timestamp", "confidence", "success"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    for e in 0..2 {
+        for a in ["x", "y", "z"] {
+            h.push(format!("gaze_{e}_{a}"));
+        }
+    }
+    h.push("gaze_angle_x".into());
+    h.push("gaze_angle_y".into());
+    for a in ["x", "y"] {
+        h.extend((0..56).map(|i| format!("eye_lmk_{a}_{i}")));
+    }
+    for a in ["X", "Y", "Z"] {
+        h.extend((0..56).map(|i| format!("eye_lmk_{a}_{i}")));
+    }
+    h.extend(pose_columns().iter().map(|s| s.to_string()));
+    for a in ["x", "y"] {
+        h.extend((0..LANDMARK_COUNT).map(|i| format!("{a}_{i}")));
+    }
+    for a in ["X", "Y", "Z"] {
+        h.extend((0..LANDMARK_COUNT).map(|i| format!("{a}_{i}")));
+    }
+    for p in ["p_scale", "p_rx", "p_ry", "p_rz", "p_tx", "p_ty"] {
+        h.push(p.into());
+    }
+    h.extend((0..34).map(|i| format!("p_{i}")));
+    h.extend((0..AU_COUNT).map(au_column));
+    h.extend(AU_NAMES.iter().map(|a| format!("{a}_c")));
+    h.push("AU28_c".into());
+    h
+}

@@ -1,0 +1,145 @@
+//! Head pose and the face frame: rigid alignment of landmark sets (Kabsch) and OpenFace's
+//! Euler angles.
+//!
+//! Coordinates are the model's: +x toward the subject's left, +y up, +z out of the face, so a
+//! camera in front sees +x on the image's right. OpenFace's camera frame has +y down and +z
+//! into the scene, a half turn about x from ours (`C = diag(1, -1, -1)`); a head rotation `R`
+//! in our frame is `C R C` in OpenFace's. OpenFace composes `R = Rx(pitch) Ry(yaw) Rz(roll)`
+//! (its `Euler2RotationMatrix`), so `yaw = asin(R02)`, `pitch = atan2(-R12, R22)`,
+//! `roll = atan2(-R01, R00)`. Positive pitch turns the face down.
+
+use crate::sim::geom::{sub, Rot3, V3};
+
+/// Head rotation in OpenFace's convention (`pose_Rx`, `pose_Ry`, `pose_Rz`), radians.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HeadPose {
+    pub pitch: f64,
+    pub yaw: f64,
+    pub roll: f64,
+}
+
+impl HeadPose {
+    /// The pose of a head turned by `r` (model frame) from the frontal neutral face.
+    pub fn from_rotation(r: &Rot3) -> HeadPose {
+        let m = r.0;
+        // C R C flips the signs of the entries that mix x with y or z.
+        let c = [
+            [m[0][0], -m[0][1], -m[0][2]],
+            [-m[1][0], m[1][1], m[1][2]],
+            [-m[2][0], m[2][1], m[2][2]],
+        ];
+        HeadPose {
+            pitch: (-c[1][2]).atan2(c[2][2]),
+            yaw: c[0][2].clamp(-1.0, 1.0).asin(),
+            roll: (-c[0][1]).atan2(c[0][0]),
+        }
+    }
+
+    /// The model-frame rotation of this pose (inverse of `from_rotation`).
+    pub fn rotation(&self) -> Rot3 {
+        let (s1, c1) = self.pitch.sin_cos();
+        let (s2, c2) = self.yaw.sin_cos();
+        let (s3, c3) = self.roll.sin_cos();
+        let c = [
+            [c2 * c3, -c2 * s3, s2],
+            [c1 * s3 + c3 * s1 * s2, c1 * c3 - s1 * s2 * s3, -c2 * s1],
+            [s1 * s3 - c1 * c3 * s2, c3 * s1 + c1 * s2 * s3, c1 * c2],
+        ];
+        Rot3([
+            [c[0][0], -c[0][1], -c[0][2]],
+            [-c[1][0], c[1][1], c[1][2]],
+            [-c[2][0], c[2][1], c[2][2]],
+        ])
+    }
+}
+
+/// The rigid motion `x -> r x + t` that best maps `from[i]` onto `to[i]` (least squares over
+/// the chosen points; Kabsch with the reflection fix).
+pub fn align(from: &[V3], to: &[V3]) -> (Rot3, V3) {
+    let n = from.len() as f64;
+    let mean = |ps: &[V3]| {
+        let mut m = [0.0; 3];
+        for p in ps {
+            for k in 0..3 {
+                m[k] += p[k] / n;
+            }
+        }
+        m
+    };
+    let (cf, ct) = (mean(from), mean(to));
+    // Cross-covariance H = sum (to - ct)(from - cf)^T; R = U diag(1, 1, det) V^T.
+    let mut h = faer::Mat::<f64>::zeros(3, 3);
+    for (f, t) in from.iter().zip(to) {
+        let (a, b) = (sub(*t, ct), sub(*f, cf));
+        for i in 0..3 {
+            for j in 0..3 {
+                h[(i, j)] += a[i] * b[j];
+            }
+        }
+    }
+    let svd = h.svd().expect("SVD of a 3x3 matrix");
+    let (u, v) = (svd.U(), svd.V());
+    let det = |m: faer::MatRef<f64>| {
+        m[(0, 0)] * (m[(1, 1)] * m[(2, 2)] - m[(1, 2)] * m[(2, 1)])
+            - m[(0, 1)] * (m[(1, 0)] * m[(2, 2)] - m[(1, 2)] * m[(2, 0)])
+            + m[(0, 2)] * (m[(1, 0)] * m[(2, 1)] - m[(1, 1)] * m[(2, 0)])
+    };
+    let d = if det(u) * det(v) < 0.0 { -1.0 } else { 1.0 };
+    let mut r = [[0.0; 3]; 3];
+    for (i, row) in r.iter_mut().enumerate() {
+        for (j, x) in row.iter_mut().enumerate() {
+            *x = u[(i, 0)] * v[(j, 0)] + u[(i, 1)] * v[(j, 1)] + d * u[(i, 2)] * v[(j, 2)];
+        }
+    }
+    let r = Rot3(r);
+    let rc = r.apply(cf);
+    (r, [ct[0] - rc[0], ct[1] - rc[1], ct[2] - rc[2]])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn euler_angles_round_trip_and_pitch_down_is_positive() {
+        let pose = HeadPose {
+            pitch: 0.3,
+            yaw: -0.5,
+            roll: 0.2,
+        };
+        let back = HeadPose::from_rotation(&pose.rotation());
+        assert!((back.pitch - 0.3).abs() < 1e-12);
+        assert!((back.yaw + 0.5).abs() < 1e-12);
+        assert!((back.roll - 0.2).abs() < 1e-12);
+        // Turning about +x by a positive angle brings the forehead (+y) forward (+z): the
+        // face looks down, which OpenFace reports as positive pitch.
+        let down = Rot3::about_axis([1.0, 0.0, 0.0], 0.2);
+        let p = HeadPose::from_rotation(&down);
+        assert!((p.pitch - 0.2).abs() < 1e-12 && p.yaw.abs() < 1e-12);
+    }
+
+    #[test]
+    fn alignment_recovers_a_rigid_motion() {
+        let pts: Vec<V3> = (0..7)
+            .map(|i| {
+                let f = i as f64;
+                [f.sin(), (2.0 * f).cos(), 0.3 * f]
+            })
+            .collect();
+        let r = Rot3::about_axis([0.3, 1.0, -0.2], 0.7);
+        let moved: Vec<V3> = pts
+            .iter()
+            .map(|p| {
+                let q = r.apply(*p);
+                [q[0] + 1.0, q[1] - 2.0, q[2] + 0.5]
+            })
+            .collect();
+        let (found, t) = align(&pts, &moved);
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((found.0[i][j] - r.0[i][j]).abs() < 1e-10);
+            }
+        }
+        assert!((t[0] - 1.0).abs() < 1e-10 && (t[1] + 2.0).abs() < 1e-10);
+    }
+}

@@ -1,0 +1,112 @@
+//! The AU observer on the simulated face.
+
+use facelab::experiments::observe::{model_observer, observe_state};
+use facelab::io::calibration::{default_calibration_path, read_calibration};
+use facelab::io::expressions::{default_expressions_path, read_expressions};
+use facelab::observe::{landmarks, Observer, AU_NAMES};
+use facelab::sim::expression::Expression;
+use facelab::sim::geom::{Rot3, V3};
+use facelab::sim::{solve_from_rest, Activations, SolveParams, Workspace};
+
+use super::model;
+
+fn observer() -> Observer {
+    let table = read_calibration(&default_calibration_path()).unwrap();
+    model_observer(model(), table.calibration()).unwrap()
+}
+
+fn au(name: &str) -> usize {
+    AU_NAMES.iter().position(|a| *a == name).unwrap()
+}
+
+fn aus_of(a: &Activations) -> [f64; 17] {
+    let m = model();
+    let mut ws = Workspace::new(m);
+    let (state, _) = solve_from_rest(m, a, &mut ws, &SolveParams::default()).unwrap();
+    observe_state(m, &observer(), &state).unwrap().aus
+}
+
+#[test]
+fn rest_face_reads_no_action() {
+    let aus = aus_of(&Activations::neutral());
+    assert!(aus.iter().all(|&a| a < 1e-9), "{aus:?}");
+}
+
+#[test]
+fn shipped_calibration_matches_the_model() {
+    // Each AU's calibration activations must read its target with the shipped gains: the
+    // table goes stale if the model changes without `facelab observe --calibrate`.
+    let table = read_calibration(&default_calibration_path()).unwrap();
+    for (k, row) in table.rows.iter().enumerate() {
+        let read = aus_of(&table.activations(k).unwrap())[k];
+        assert!(
+            (read - row.target).abs() < 0.05,
+            "{} reads {read:.3}, target {}",
+            AU_NAMES[k],
+            row.target
+        );
+    }
+}
+
+#[test]
+fn defining_aus_rise_with_the_expression_scale() {
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    for (e, names) in [
+        (Expression::Joy, ["AU12", "AU06"]),
+        (Expression::Surprise, ["AU01", "AU26"]),
+        (Expression::Anger, ["AU04", "AU07"]),
+    ] {
+        let mut last = [0.0; 2];
+        for s in [0.3, 0.6, 1.0] {
+            let aus = aus_of(&weights.activations(e, s));
+            for (i, n) in names.iter().enumerate() {
+                let v = aus[au(n)];
+                assert!(v > last[i], "{e} {n}: {v} after {} at s = {s}", last[i]);
+                last[i] = v;
+            }
+        }
+    }
+}
+
+#[test]
+fn joy_reads_lip_corner_puller_highest() {
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let aus = aus_of(&weights.activations(Expression::Joy, 1.0));
+    let top = (0..17).max_by(|&a, &b| aus[a].total_cmp(&aus[b])).unwrap();
+    assert_eq!(AU_NAMES[top], "AU12", "{aus:?}");
+    assert!((1.5..=3.5).contains(&aus[au("AU12")]), "{aus:?}");
+}
+
+#[test]
+fn head_rotation_changes_pose_not_aus() {
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let m = model();
+    let mut ws = Workspace::new(m);
+    let (state, _) = solve_from_rest(
+        m,
+        &weights.activations(Expression::Surprise, 0.8),
+        &mut ws,
+        &SolveParams::default(),
+    )
+    .unwrap();
+    let obs = observer();
+    let face = landmarks(state.surface(m.vertex_count()));
+    let still = obs.observe(&face).unwrap();
+    let turn = Rot3::about_axis([0.2, 1.0, 0.1], 0.4);
+    let turned: [V3; 68] = face.map(|p| {
+        let q = turn.apply(p);
+        [q[0] + 0.01, q[1] - 0.02, q[2] + 0.3]
+    });
+    let moved = obs.observe(&turned).unwrap();
+    for (name, (a, b)) in AU_NAMES.iter().zip(still.aus.iter().zip(&moved.aus)) {
+        assert!((a - b).abs() < 1e-9, "{name} changed");
+    }
+    let pose = moved.pose;
+    assert!(pose.yaw.abs() > 0.3, "yaw {pose:?}");
+    let back = pose.rotation();
+    for i in 0..3 {
+        for j in 0..3 {
+            assert!((back.0[i][j] - turn.0[i][j]).abs() < 1e-6, "{pose:?}");
+        }
+    }
+}
