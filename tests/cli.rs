@@ -122,3 +122,107 @@ fn render_writes_a_png() {
     let img = image::open(&out).unwrap();
     assert_eq!((img.width(), img.height()), (480, 560));
 }
+
+/// An OpenFace-style file with 3D landmarks (mm, camera frame) of the model's rest face and
+/// its joy face, and AU columns as OpenFace would write them.
+fn landmark_file(path: &std::path::Path) {
+    use facelab::io::expressions::{default_expressions_path, read_expressions};
+    use facelab::observe::{landmarks, AU_NAMES};
+    use facelab::sim::expression::Expression;
+    use facelab::sim::{solve_from_rest, SolveParams, Workspace};
+
+    let m = super::model();
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let mut ws = Workspace::new(m);
+    let (joy, _) = solve_from_rest(
+        m,
+        &weights.activations(Expression::Joy, 1.0),
+        &mut ws,
+        &SolveParams::default(),
+    )
+    .unwrap();
+    let rest = m.rest_state();
+    let mut header = vec!["frame", "face_id", "timestamp", "confidence", "success"]
+        .into_iter()
+        .map(String::from)
+        .collect::<Vec<_>>();
+    for a in ["X", "Y", "Z"] {
+        header.extend((0..68).map(|i| format!("{a}_{i}")));
+    }
+    header.extend(AU_NAMES.iter().map(|a| format!("{a}_r")));
+    let mut text = header.join(",") + "\n";
+    for (frame, state, au12) in [(1, &rest, 0.0), (2, &joy, 2.5), (3, &rest, 0.1)] {
+        let l = landmarks(state.surface(m.vertex_count()));
+        let mut row = vec![frame.to_string(), "0".into(), "0.0".into(), "0.98".into()];
+        row.push(if frame == 3 { "0" } else { "1" }.into());
+        for (axis, sign) in [(0, 1.0), (1, -1.0), (2, -1.0)] {
+            row.extend(l.iter().map(|p| format!("{:.3}", sign * p[axis] * 1000.0)));
+        }
+        row.extend((0..17).map(|k| format!("{:.2}", if k == 8 { au12 } else { 0.0 })));
+        text += &(row.join(",") + "\n");
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn observe_reads_a_files_landmarks_and_writes_our_aus() {
+    let input = temp("landmarks.csv");
+    let out = temp("ours.csv");
+    landmark_file(&input);
+    let run = Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(["observe", "--openface"])
+        .arg(&input)
+        .arg("--neutral-frame")
+        .arg("1")
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("2 rows observed, 1 skipped"), "{stdout}");
+    let written = facelab::io::openface::read_openface(&out).unwrap();
+    assert_eq!(written.rows.len(), 2);
+    assert!(written.rows[0].aus.iter().all(|&a| a < 0.01));
+    assert!(
+        written.rows[1].aus[8] > 1.5,
+        "AU12 of joy: {:?}",
+        written.rows[1].aus
+    );
+}
+
+#[test]
+fn observe_without_3d_landmarks_says_so() {
+    let input = temp("aus_only.csv");
+    let au: Vec<String> = facelab::observe::AU_NAMES
+        .iter()
+        .map(|a| format!("{a}_r"))
+        .collect();
+    std::fs::write(
+        &input,
+        format!(
+            "frame,success,{}\n1,1,{}\n",
+            au.join(","),
+            vec!["0.5"; 17].join(",")
+        ),
+    )
+    .unwrap();
+    let out = temp("never.csv");
+    let (ok, err) = facelab(&[
+        "observe",
+        "--openface",
+        input.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(
+        err.contains("no 3D landmarks") && err.contains("aus_only.csv"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing written on error");
+}

@@ -305,3 +305,35 @@ fn measures(
         },
     ]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::stream;
+
+    #[test]
+    fn noise_is_seeded_and_off_by_default() {
+        let clean: [f64; AU_COUNT] = std::array::from_fn(|k| 0.2 * k as f64);
+        let off = ObserverNoise::default();
+        assert!(off.is_off());
+        let mut same = clean;
+        let gains = off.subject_gains(&mut stream(1, "t"));
+        off.apply(&mut same, &gains, &mut stream(1, "t"));
+        assert_eq!(same, clean);
+
+        let on = ObserverNoise {
+            noise_sd: 0.2,
+            gain_spread: 0.1,
+        };
+        let run = |seed| {
+            let mut rng = stream(seed, "observer/noise");
+            let gains = on.subject_gains(&mut rng);
+            let mut aus = clean;
+            on.apply(&mut aus, &gains, &mut rng);
+            aus
+        };
+        assert_eq!(run(3), run(3));
+        assert_ne!(run(3), run(4));
+        assert!(run(3).iter().all(|a| (0.0..=AU_MAX).contains(a)));
+    }
+}
