@@ -110,3 +110,47 @@ fn head_rotation_changes_pose_not_aus() {
         }
     }
 }
+
+/// FACS prototypes (shared/facs-facts.md (a): the union of the EMFACS, Ekman & Friesen and
+/// Du et al. core AUs that OpenFace measures).
+fn prototype(e: Expression) -> &'static [&'static str] {
+    match e {
+        Expression::Joy => &["AU06", "AU12", "AU25"],
+        Expression::Sadness => &["AU01", "AU04", "AU15", "AU17"],
+        Expression::Anger => &["AU04", "AU05", "AU07", "AU17", "AU23"],
+        Expression::Fear => &["AU01", "AU02", "AU04", "AU05", "AU20", "AU25", "AU26"],
+        Expression::Disgust => &["AU04", "AU09", "AU10", "AU15", "AU17"],
+        Expression::Surprise => &["AU01", "AU02", "AU05", "AU25", "AU26"],
+    }
+}
+
+#[test]
+fn each_expression_reads_its_prototype_aus_in_openface_range() {
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    for e in Expression::ALL {
+        let aus = aus_of(&weights.activations(e, 1.0));
+        let proto = prototype(e);
+        let is_proto = |k: usize| proto.contains(&AU_NAMES[k]);
+        let top = (0..17).max_by(|&a, &b| aus[a].total_cmp(&aus[b])).unwrap();
+        assert!(
+            is_proto(top),
+            "{e}: strongest is {} in {aus:?}",
+            AU_NAMES[top]
+        );
+        let mean = |pick: bool| {
+            let v: Vec<f64> = (0..17)
+                .filter(|&k| is_proto(k) == pick)
+                .map(|k| aus[k])
+                .collect();
+            v.iter().sum::<f64>() / v.len() as f64
+        };
+        assert!(
+            mean(true) > 3.0 * mean(false),
+            "{e}: prototype mean {:.2} vs others {:.2}: {aus:?}",
+            mean(true),
+            mean(false)
+        );
+        // Posed faces read their defining AUs around 1.5-3.5 (facs-facts (d)), not pinned.
+        assert!(aus[top] <= 4.0 && aus[top] >= 1.5, "{e}: {aus:?}");
+    }
+}

@@ -21,11 +21,11 @@
 //! | AU09 nose wrinkler | rise of the nostril wings (31, 35) |
 //! | AU10 upper lip raiser | rise of the upper lip (50, 51, 52) |
 //! | AU12 lip corner puller | rise of the mouth corners (48, 54) plus half their outward pull |
-//! | AU14 dimpler | backward pull of the mouth corners relative to the lip points beside them (49, 53, 55, 59): the dimple is the corner sinking in |
+//! | AU14 dimpler | backward pull of the mouth corners relative to the upper lip beside them (49, 53), less half their vertical motion: corners pulled down or up slide back over the curved face without a dimple |
 //! | AU15 lip corner depressor | fall of the corners below the mid-line of the lips (62, 66) |
 //! | AU17 chin raiser | lengthening of lower lip to chin (57-8): mentalis pushes the lower lip up off the chin |
 //! | AU20 lip stretcher | outward pull of the corners beyond their rise |
-//! | AU23 lip tightener | narrowing of the mouth (48-54); the model's sphincter bunches the red lips rather than thinning them |
+//! | AU23 lip tightener | narrowing of the upper lip (49-53), which the jaw does not stretch; the model's sphincter bunches the red lips rather than thinning them |
 //! | AU25 lips part | opening of the inner lips (62-66) |
 //! | AU26 jaw drop | lengthening of nose tip to chin (30-8) |
 //! | AU45 blink | closing of the eye aperture, as a fraction of the neutral aperture |
@@ -291,11 +291,11 @@ fn measures(
         dy(&[31, 35]),
         dy(&[50, 51, 52]),
         pos(corner_rise) + 0.5 * pos(corner_out),
-        back(&CORNERS) - back(&[49, 53, 55, 59]),
+        back(&CORNERS) - back(&[49, 53]) - 0.5 * corner_rise.abs(),
         -(corner_rise - mid),
         dist(c, 57, 8) - dist(n, 57, 8),
         corner_out - pos(corner_rise),
-        dist(n, 48, 54) - dist(c, 48, 54),
+        dist(n, 49, 53) - dist(c, 49, 53),
         dist(c, 62, 66) - dist(n, 62, 66),
         dist(c, 30, 8) - dist(n, 30, 8),
         if neutral_aperture > 0.0 {

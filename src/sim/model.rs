@@ -213,10 +213,15 @@ impl FaceModel {
                     .expect("every lid action has a muscle");
                 a.muscle(pair, side)
             };
+            let orbital = MUSCLE_PAIRS
+                .iter()
+                .position(|m| m.au == 6)
+                .expect("orbicularis oculi pars orbitalis drives AU06");
             let fractions = self.rig.lid_fractions(
                 lid(LidAction::Close),
                 lid(LidAction::Tighten),
                 lid(LidAction::Raise),
+                a.muscle(orbital, side),
             );
             let e = &self.rig.eyes[eye];
             let margins = e

@@ -58,7 +58,9 @@ impl JawParams {
 /// How far each lid muscle turns the margins, as fractions of the angle that would bring the
 /// upper and lower margins together. Set by eye from the model's renders so that the
 /// pretarsal part alone closes the eye (a blink), the preseptal part narrows it to about half
-/// (lid tightener), and the levator raises the upper lid by about 2 mm.
+/// (lid tightener), and the levator raises the upper lid by about 2 mm. The orbital part of
+/// orbicularis oculi raises the cheek, which pushes the lower lid up (FACS AU6: the
+/// infraorbital triangle and lower lid rise): `cheek_lower` per unit of its activation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LidParams {
     /// Depth of the eyeball centre behind the line joining the eye corners (m). Default 12 mm
@@ -69,6 +71,7 @@ pub struct LidParams {
     pub tighten_upper: f64,
     pub tighten_lower: f64,
     pub raise_upper: f64,
+    pub cheek_lower: f64,
     /// Largest closed fraction; the margins stop just short of touching.
     pub max_closure: f64,
 }
@@ -82,6 +85,7 @@ impl Default for LidParams {
             tighten_upper: 0.15,
             tighten_lower: 0.35,
             raise_upper: 0.35,
+            cheek_lower: 0.3,
             max_closure: 0.97,
         }
     }
@@ -325,11 +329,11 @@ impl Rig {
     }
 
     /// Lid rotation angles (upper, lower) as fractions of the closing angle for the three lid
-    /// muscle activations of one eye; positive closes.
-    pub fn lid_fractions(&self, close: f64, tighten: f64, raise: f64) -> (f64, f64) {
+    /// muscle activations of one eye and its orbital orbicularis (`cheek`); positive closes.
+    pub fn lid_fractions(&self, close: f64, tighten: f64, raise: f64, cheek: f64) -> (f64, f64) {
         let l = &self.lids;
         let mut upper = l.close_upper * close + l.tighten_upper * tighten - l.raise_upper * raise;
-        let mut lower = l.close_lower * close + l.tighten_lower * tighten;
+        let mut lower = l.close_lower * close + l.tighten_lower * tighten + l.cheek_lower * cheek;
         let total = upper + lower;
         if total > l.max_closure {
             upper *= l.max_closure / total;
