@@ -112,3 +112,34 @@ fn bad_files_name_file_line_and_column() {
     let e = error(&nan);
     assert!(e.contains("fixture.csv:2") && e.contains("pose_Rx"), "{e}");
 }
+
+#[test]
+fn full_feature_extraction_file_reads_every_block() {
+    use facelab::io::openface::full_header;
+    let header = full_header();
+    assert_eq!(header.len(), 714);
+    let row = |frame: usize, success: u8| {
+        let mut cells = vec![
+            frame.to_string(),
+            "0".into(),
+            "0.0".into(),
+            "0.9".into(),
+            success.to_string(),
+        ];
+        cells.extend((5..header.len()).map(|i| format!("{:.1}", (i % 97) as f64 * 0.1)));
+        cells.join(",")
+    };
+    let text = format!("{}\n{}\n{}\n", header.join(","), row(1, 1), row(2, 0));
+    let file = parse(&text).unwrap();
+    assert!(file.layout.pose && file.layout.landmarks_2d && file.layout.landmarks_3d);
+    assert_eq!((file.rows.len(), file.skipped), (1, 1));
+    let r = &file.rows[0];
+    let at = |name: &str| {
+        let i = header.iter().position(|h| h == name).unwrap();
+        (i % 97) as f64 * 0.1
+    };
+    assert!((r.landmarks_3d.as_ref().unwrap()[30][2] - at("Z_30")).abs() < 1e-9);
+    assert!((r.landmarks_2d.as_ref().unwrap()[5][1] - at("y_5")).abs() < 1e-9);
+    assert!((r.pose.unwrap()[3] - at("pose_Rx")).abs() < 1e-9);
+    assert!((r.aus[8] - at("AU12_r")).abs() < 1e-9);
+}
