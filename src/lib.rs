@@ -9,9 +9,13 @@
 // Small dense matrix algebra reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
+pub mod cache;
 pub mod experiments;
 pub mod io;
+pub mod learn;
 pub mod observe;
 pub mod report;
 pub mod rng;
 pub mod sim;
+pub mod spec;
+pub mod stats;

@@ -10,6 +10,7 @@ use anyhow::Context;
 use facelab::experiments::bench::{bench_observe, bench_solve};
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
 use facelab::experiments::observe;
+use facelab::experiments::run;
 use facelab::io::atomic::write_atomic;
 use facelab::io::calibration::default_calibration_path;
 use facelab::report::render::{Camera, RenderOptions};
@@ -124,6 +125,39 @@ enum Command {
         /// Where to write our AUs (OpenFace layout) for --openface
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// Run an experiment spec: dataset, training, tables, figures (cached by content).
+    Run {
+        spec: PathBuf,
+        /// Override a spec value, typed like the file: --set train.learning_rate=0.001
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+        /// Worker threads [default: all cores]; results do not depend on it
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Results folder (the cache is in <results>/.cache)
+        #[arg(long, default_value = "results")]
+        results: PathBuf,
+    },
+    /// Validate a spec and print it resolved, without running anything.
+    Check {
+        spec: PathBuf,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+    },
+    /// Which stages of a spec are cached and which would run.
+    Status {
+        spec: PathBuf,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+        #[arg(long, default_value = "results")]
+        results: PathBuf,
+    },
+    /// Rerun a run from scratch in a temporary folder and compare its CSVs by hash.
+    Verify {
+        run_dir: PathBuf,
+        #[arg(long)]
+        threads: Option<usize>,
     },
     /// Benchmarks (run with --release).
     Bench {
@@ -245,6 +279,65 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 observe::print_observation(&o, stdout)?;
             }
         }
+        Command::Run {
+            spec,
+            sets,
+            threads,
+            results,
+        } => {
+            let threads = set_threads(threads)?;
+            let summary = run::run(
+                &spec,
+                &run::RunOptions {
+                    results,
+                    sets,
+                    threads,
+                },
+            )?;
+            let hits = summary.stages.iter().filter(|s| s.hit).count();
+            println!(
+                "{} stages, {} cached, {} computed; wrote {}",
+                summary.stages.len(),
+                hits,
+                summary.stages.len() - hits,
+                summary.dir.display()
+            );
+        }
+        Command::Check { spec, sets } => {
+            let cells = facelab::spec::load(&spec, &sets)?;
+            for cell in cells {
+                if !cell.name.is_empty() {
+                    println!("# cell {}", cell.name);
+                }
+                print!("{}", facelab::spec::to_toml(&cell.spec.values));
+            }
+        }
+        Command::Status {
+            spec,
+            sets,
+            results,
+        } => {
+            for (stage, key, cached) in run::status(&spec, &sets, &results)? {
+                println!(
+                    "{:<7} {stage} {}",
+                    if cached { "cached" } else { "stale" },
+                    &key[..12]
+                );
+            }
+        }
+        Command::Verify { run_dir, threads } => {
+            let threads = set_threads(threads)?;
+            let differ = run::verify(&run_dir, threads)?;
+            if differ.is_empty() {
+                println!("{}: every CSV reproduced byte for byte", run_dir.display());
+            } else {
+                anyhow::bail!(
+                    "{}: these outputs differ on rerun: {}",
+                    run_dir.display(),
+                    differ.join(", ")
+                );
+            }
+        }
         Command::Bench { what } => match what {
             Bench::Observe { frames } => bench_observe(frames, &mut std::io::stdout().lock())?,
             Bench::Solve {
@@ -267,6 +360,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         },
     }
     Ok(())
+}
+
+/// Sets the worker count for rayon and for candle (which reads `RAYON_NUM_THREADS` on every
+/// matrix product when it is unset, at a cost). Returns the count used.
+fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
+    let n = threads.unwrap_or_else(|| {
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+    });
+    if n == 0 {
+        anyhow::bail!("--threads must be at least 1");
+    }
+    std::env::set_var("RAYON_NUM_THREADS", n.to_string());
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build_global()
+        .context("starting the thread pool")?;
+    Ok(n)
 }
 
 fn main() -> ExitCode {

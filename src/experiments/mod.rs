@@ -1,5 +1,8 @@
 //! The harness: commands that put the simulator, the observer and the reports together.
 
 pub mod bench;
+pub mod dataset;
 pub mod face;
 pub mod observe;
+pub mod run;
+pub mod table1;

@@ -5,5 +5,6 @@
 pub mod atomic;
 pub mod calibration;
 pub mod expressions;
+pub mod facs;
 pub mod mesh;
 pub mod openface;

@@ -1,0 +1,901 @@
+//! `facelab run | status | verify`: a spec's stages, cached by content (DESIGN 2.5).
+//!
+//! Stages and what their keys hash (besides the stage name and version):
+//! - `basis` (only with `dataset.start = "predicted"`): the face assets, `dataset.subdivisions`,
+//!   `dataset.tolerance`;
+//! - `dataset`: the basis key, the face, expression and calibration files, `dataset.*`,
+//!   `observer.*`;
+//! - `train` (per seed and network): the dataset key, `model.*`, `train.*`,
+//!   `dataset.test_fraction`, the FACS maps, the seed and the network;
+//! - evaluation and reports are cheap and always run.
+//!
+//! Each run writes `results/<experiment>/run-NNNN/` (one subfolder per sweep cell) with the
+//! resolved `spec.toml`, `manifest.json` and CSVs; `results/<experiment>/latest` points at it.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::dataset::{self, Sample, SolveStart};
+use super::face::FaceSource;
+use super::observe::model_observer;
+use super::table1::{self, Network, Row};
+use crate::cache::{self, Cache, Entry};
+use crate::io::atomic::write_atomic;
+use crate::io::calibration::{default_calibration_path, read_calibration};
+use crate::io::expressions::default_expressions_path;
+use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
+use crate::io::mesh::default_mesh_path;
+use crate::learn::{self, Curves, Mlp};
+use crate::rng::stream;
+use crate::sim::basis::LinearBasis;
+use crate::sim::geom::V3;
+use crate::sim::SolveParams;
+use crate::spec::{self, Cell, Spec};
+use crate::stats;
+
+/// Code versions: bump when a stage's output for the same inputs changes.
+const BASIS_VERSION: u32 = 1;
+const DATASET_VERSION: u32 = 1;
+const TRAIN_VERSION: u32 = 1;
+
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// Results folder; the cache lives in `<results>/.cache`, tables and figures in
+    /// `<results>/../paper-tables` and `<results>/../figures`.
+    pub results: PathBuf,
+    pub sets: Vec<String>,
+    pub threads: usize,
+}
+
+/// What one stage did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StageRecord {
+    pub cell: String,
+    pub stage: String,
+    pub key: String,
+    pub hit: bool,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct RunSummary {
+    pub dir: PathBuf,
+    pub stages: Vec<StageRecord>,
+    /// Output file (relative to the run folder) -> SHA-256.
+    pub outputs: BTreeMap<String, String>,
+}
+
+/// Values under the given dotted prefixes, as canonical `key = value` lines.
+fn values_text(spec: &Spec, prefixes: &[&str]) -> String {
+    spec.values
+        .iter()
+        .filter(|(k, _)| prefixes.iter().any(|p| k.starts_with(p)))
+        .map(|(k, v)| format!("{k} = {v}\n"))
+        .collect()
+}
+
+fn file_hash(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    Ok(cache::sha256(&bytes))
+}
+
+/// The inputs every stage shares: assets and data files, by content.
+struct Assets {
+    face: String,
+    data: String,
+    facs: FacsMaps,
+    facs_hash: String,
+}
+
+fn assets() -> Result<Assets> {
+    let face = file_hash(&default_mesh_path())?;
+    let data = format!(
+        "{}{}",
+        file_hash(&default_expressions_path())?,
+        file_hash(&default_calibration_path())?
+    );
+    let ea = data_path(DEFAULT_EXPRESSION_AUS);
+    let am = data_path(DEFAULT_AU_MUSCLES);
+    let facs = read_facs(&ea, &am)?;
+    let facs_hash = format!("{}{}", file_hash(&ea)?, file_hash(&am)?);
+    Ok(Assets {
+        face,
+        data,
+        facs,
+        facs_hash,
+    })
+}
+
+/// Cache keys of a cell's stages.
+struct Keys {
+    basis: Option<String>,
+    dataset: String,
+    /// (seed, network) -> key, in seed then `Network::all()` order.
+    train: Vec<((u64, Network), String)>,
+}
+
+fn keys(spec: &Spec, a: &Assets) -> Keys {
+    let face = format!("face={}\n", a.face);
+    let basis = (spec.dataset.start == SolveStart::Predicted).then(|| {
+        let v = format!(
+            "{face}dataset.subdivisions = {}\ndataset.tolerance = {}\n",
+            spec.dataset.subdivisions, spec.dataset.tolerance
+        );
+        cache::key("basis", BASIS_VERSION, &v, &[])
+    });
+    let dv = format!(
+        "{face}data={}\n{}",
+        a.data,
+        values_text(spec, &["dataset.", "observer."])
+    );
+    let dataset = cache::key(
+        "dataset",
+        DATASET_VERSION,
+        &dv,
+        &basis.iter().map(String::as_str).collect::<Vec<_>>(),
+    );
+    let mut train = Vec::new();
+    for &seed in &spec.seeds {
+        for network in Network::all() {
+            let v = format!(
+                "facs={}\nseed={seed}\nnetwork={}\n{}{}",
+                a.facs_hash,
+                network.name(),
+                values_text(spec, &["model.", "train."]),
+                values_text(spec, &["dataset.test_fraction"]),
+            );
+            train.push((
+                (seed, network),
+                cache::key("train", TRAIN_VERSION, &v, &[&dataset]),
+            ));
+        }
+    }
+    Keys {
+        basis,
+        dataset,
+        train,
+    }
+}
+
+fn bar(len: u64, message: &str) -> ProgressBar {
+    let b = ProgressBar::new(len);
+    b.set_style(
+        ProgressStyle::with_template(
+            "{msg:>10} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    b.set_message(message.to_string());
+    b
+}
+
+fn basis_bytes(b: &LinearBasis) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend((b.vertex_count as u64).to_le_bytes());
+    out.extend((b.rest.len() as u64).to_le_bytes());
+    out.extend((b.fields.len() as u64).to_le_bytes());
+    for p in &b.rest {
+        for c in p {
+            out.extend(c.to_le_bytes());
+        }
+    }
+    for f in &b.fields {
+        for v in f {
+            out.extend(v.to_le_bytes());
+        }
+    }
+    out
+}
+
+fn basis_from(bytes: &[u8]) -> Result<LinearBasis> {
+    let mut words = bytes
+        .chunks_exact(8)
+        .map(|c| <[u8; 8]>::try_from(c).expect("8 bytes"));
+    let mut next_u = || -> Result<usize> {
+        Ok(u64::from_le_bytes(words.next().context("basis file cut short")?) as usize)
+    };
+    let (vertex_count, nodes, count) = (next_u()?, next_u()?, next_u()?);
+    let floats: Vec<f64> = bytes[24..]
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+        .collect();
+    if floats.len() != 3 * nodes * (1 + count) {
+        bail!(
+            "basis file has {} values, expected {}",
+            floats.len(),
+            3 * nodes * (1 + count)
+        );
+    }
+    let rest: Vec<V3> = floats[..3 * nodes]
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    let fields = floats[3 * nodes..]
+        .chunks_exact(3 * nodes)
+        .map(<[f64]>::to_vec)
+        .collect();
+    Ok(LinearBasis {
+        vertex_count,
+        rest,
+        fields,
+    })
+}
+
+fn curves_csv(curves: &Curves) -> String {
+    let mut out = String::from("epoch,train_mse,test_mse\n");
+    for (i, (a, b)) in curves.train.iter().zip(&curves.test).enumerate() {
+        out.push_str(&format!("{},{a},{b}\n", i + 1));
+    }
+    out
+}
+
+fn curves_from(text: &str) -> Curves {
+    let mut c = Curves::default();
+    for line in text.lines().skip(1) {
+        let cells: Vec<f64> = line.split(',').filter_map(|s| s.parse().ok()).collect();
+        if cells.len() == 3 {
+            c.train.push(cells[1]);
+            c.test.push(cells[2]);
+        }
+    }
+    c
+}
+
+/// Everything one cell produced.
+struct CellResult {
+    rows: Vec<Row>,
+    /// (seed, network) -> curves.
+    curves: Vec<((u64, Network), Curves)>,
+    samples: usize,
+}
+
+fn run_cell(
+    cell: &Cell,
+    a: &Assets,
+    cache: &Cache,
+    records: &mut Vec<StageRecord>,
+) -> Result<CellResult> {
+    let spec = &cell.spec;
+    let k = keys(spec, a);
+    let mut record = |stage: &str, key: &str, hit: bool, t: Instant| {
+        records.push(StageRecord {
+            cell: cell.name.clone(),
+            stage: stage.into(),
+            key: key.into(),
+            hit,
+            seconds: t.elapsed().as_secs_f64(),
+        })
+    };
+    let source = FaceSource {
+        subdivisions: spec.dataset.subdivisions,
+        ..FaceSource::default()
+    };
+
+    // Dataset (and the basis it starts from).
+    let t = Instant::now();
+    let samples: Vec<Sample> = match cache.get("dataset", &k.dataset)? {
+        Some(e) => {
+            let text = String::from_utf8(e.read("dataset.csv")?)?;
+            let s = dataset::from_csv(&text, &e.path("dataset.csv").display().to_string())?;
+            record("dataset", &k.dataset, true, t);
+            s
+        }
+        None => {
+            let model = source.model()?;
+            let weights = source.weights()?;
+            let calibration = read_calibration(&default_calibration_path())?.calibration();
+            let observer = model_observer(&model, calibration)?;
+            let basis = match &k.basis {
+                None => None,
+                Some(key) => {
+                    let tb = Instant::now();
+                    Some(match cache.get("basis", key)? {
+                        Some(e) => {
+                            let b = basis_from(&e.read("basis.bin")?)?;
+                            record("basis", key, true, tb);
+                            b
+                        }
+                        None => {
+                            let params = SolveParams {
+                                tolerance: spec.dataset.tolerance,
+                                ..SolveParams::default()
+                            };
+                            let b = LinearBasis::build(&model, &params)
+                                .context("building the linear basis")?;
+                            cache.put("basis", key, &[("basis.bin".into(), basis_bytes(&b))])?;
+                            record("basis", key, false, tb);
+                            b
+                        }
+                    })
+                }
+            };
+            let total = spec.dataset.pairs_per_expression * 6;
+            let progress = bar(total as u64, "dataset");
+            let tick = || progress.inc(1);
+            let s = dataset::generate(
+                &model,
+                &weights,
+                &observer,
+                basis.as_ref(),
+                &spec.dataset,
+                &spec.observer,
+                spec.dataset.seed,
+                &tick,
+            )?;
+            progress.finish_and_clear();
+            cache.put(
+                "dataset",
+                &k.dataset,
+                &[("dataset.csv".into(), dataset::to_csv(&s).into_bytes())],
+            )?;
+            record("dataset", &k.dataset, false, t);
+            s
+        }
+    };
+
+    // Training: every (seed, network).
+    let progress = bar(k.train.len() as u64, "train");
+    let mut nets: BTreeMap<(u64, Network), Mlp> = BTreeMap::new();
+    let mut curves = Vec::new();
+    for ((seed, network), key) in &k.train {
+        let t = Instant::now();
+        let split = table1::split(&samples, spec.dataset.test_fraction, *seed);
+        let entry: Entry = match cache.get("train", key)? {
+            Some(e) => {
+                record("train", key, true, t);
+                e
+            }
+            None => {
+                let (train_pairs, test_pairs) =
+                    table1::network_pairs(*network, &samples, &split, &a.facs);
+                let mut rng = stream(*seed, &format!("train/{}", network.name()));
+                let mut uniform = || rng.uniform();
+                let (mlp, c) = learn::train(
+                    &train_pairs,
+                    &test_pairs,
+                    &spec.model,
+                    &spec.train,
+                    &mut uniform,
+                )
+                .with_context(|| format!("training the {} network, seed {seed}", network.name()))?;
+                let e = cache.put(
+                    "train",
+                    key,
+                    &[
+                        ("weights.safetensors".into(), mlp.to_safetensors()?),
+                        ("curves.csv".into(), curves_csv(&c).into_bytes()),
+                    ],
+                )?;
+                record("train", key, false, t);
+                e
+            }
+        };
+        nets.insert(
+            (*seed, *network),
+            Mlp::from_safetensors(&entry.read("weights.safetensors")?)?,
+        );
+        curves.push((
+            (*seed, *network),
+            curves_from(&String::from_utf8(entry.read("curves.csv")?)?),
+        ));
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+
+    let mut rows = Vec::new();
+    for &seed in &spec.seeds {
+        let split = table1::split(&samples, spec.dataset.test_fraction, seed);
+        let seed_nets: Vec<Mlp> = Network::all()
+            .into_iter()
+            .map(|n| nets.remove(&(seed, n)).expect("trained above"))
+            .collect();
+        rows.push(table1::evaluate(
+            seed, &seed_nets, &samples, &split, &a.facs,
+        )?);
+    }
+    Ok(CellResult {
+        rows,
+        curves,
+        samples: samples.len(),
+    })
+}
+
+fn fmt(v: f64) -> String {
+    format!("{v:.6e}")
+}
+
+/// `seed,joy,...,disgust,all,unified_joy,...` rows, then `mean` and `ci95`.
+fn table1_csv(rows: &[Row]) -> String {
+    let names: Vec<String> = table1::ORDER.iter().map(|e| e.to_string()).collect();
+    let mut out = format!(
+        "seed,{},all,{}\n",
+        names.join(","),
+        names
+            .iter()
+            .map(|n| format!("unified_{n}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    );
+    let line = |label: String, v: &[f64]| {
+        format!(
+            "{label},{}\n",
+            v.iter().map(|x| fmt(*x)).collect::<Vec<_>>().join(",")
+        )
+    };
+    let flat: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| {
+            r.per_expression
+                .iter()
+                .chain(std::iter::once(&r.all))
+                .chain(&r.unified_restricted)
+                .copied()
+                .collect()
+        })
+        .collect();
+    for (r, v) in rows.iter().zip(&flat) {
+        out.push_str(&line(r.seed.to_string(), v));
+    }
+    let column = |j: usize| flat.iter().map(|v| v[j]).collect::<Vec<_>>();
+    let means: Vec<f64> = (0..13).map(|j| stats::mean(&column(j))).collect();
+    let cis: Vec<f64> = (0..13).map(|j| stats::ci95(&column(j))).collect();
+    out.push_str(&line("mean".into(), &means));
+    out.push_str(&line("ci95".into(), &cis));
+    out
+}
+
+fn summary(rows: &[Row]) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+    let col = |f: &dyn Fn(&Row) -> f64| rows.iter().map(f).collect::<Vec<_>>();
+    let mut mean = Vec::new();
+    let mut ci = Vec::new();
+    let mut umean = Vec::new();
+    let mut uci = Vec::new();
+    for k in 0..6 {
+        let v = col(&|r| r.per_expression[k]);
+        mean.push(stats::mean(&v));
+        ci.push(stats::ci95(&v));
+        let u = col(&|r| r.unified_restricted[k]);
+        umean.push(stats::mean(&u));
+        uci.push(stats::ci95(&u));
+    }
+    let all = col(&|r| r.all);
+    mean.push(stats::mean(&all));
+    ci.push(stats::ci95(&all));
+    (mean, ci, umean, uci)
+}
+
+fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> String {
+    let (mean, ci, umean, uci) = summary(rows);
+    let heads: Vec<String> = table1::ORDER
+        .iter()
+        .map(|e| format!("MSE_{}", capitalize(e.name())))
+        .chain(std::iter::once("MSE_All".into()))
+        .collect();
+    let mut out =
+        String::from("# Table 1: per-expression networks vs one unified network (test MSE)\n\n");
+    out.push_str(&format!(
+        "facelab: {} seeds ({}), {} pairs ({} per expression, {:.0}% held out), network {} x {} ReLU, Adam lr {}, batch {}, {} epochs, normalization {}. Mean ± 95% interval over seeds.\n\n",
+        rows.len(),
+        spec.seeds.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", "),
+        samples,
+        spec.dataset.pairs_per_expression,
+        spec.dataset.test_fraction * 100.0,
+        spec.model.layers,
+        spec.model.width,
+        spec.train.learning_rate,
+        spec.train.batch_size,
+        spec.train.epochs,
+        spec.train.normalization.name(),
+    ));
+    out.push_str(&format!("| | {} |\n", heads.join(" | ")));
+    out.push_str(&format!("|---|{}\n", "---|".repeat(7)));
+    out.push_str(&format!(
+        "| Zeng et al. | {} |\n",
+        table1::PAPER
+            .iter()
+            .map(|v| format!("{v:.6}"))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    ));
+    out.push_str(&format!(
+        "| facelab | {} |\n",
+        mean.iter()
+            .zip(&ci)
+            .map(|(m, c)| format!("{m:.6} ± {c:.6}"))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    ));
+    out.push_str(&format!(
+        "| facelab / paper | {} |\n",
+        mean.iter()
+            .zip(&table1::PAPER)
+            .map(|(m, p)| format!("{:.2}", m / p))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    ));
+    out.push_str(&format!(
+        "| unified network, same pairs and outputs | {} | {:.6} ± {:.6} |\n",
+        umean
+            .iter()
+            .zip(&uci)
+            .map(|(m, c)| format!("{m:.6} ± {c:.6}"))
+            .collect::<Vec<_>>()
+            .join(" | "),
+        mean[6],
+        ci[6]
+    ));
+    out.push_str(
+        "\nThe last row scores the unified network on each expression's test pairs and only that expression's network outputs, the like-for-like comparison with the row above it.\n",
+    );
+    out
+}
+
+fn table1_tex(rows: &[Row]) -> String {
+    let (mean, ci, umean, uci) = summary(rows);
+    let mut out = String::from(
+        "\\begin{tabular}{lrrrrrrr}\n\\hline\n & Joy & Sadness & Fear & Anger & Surprise & Disgust & All \\\\\n\\hline\n",
+    );
+    out.push_str(&format!(
+        "Zeng et al. & {} \\\\\n",
+        table1::PAPER
+            .iter()
+            .map(|v| format!("{v:.6}"))
+            .collect::<Vec<_>>()
+            .join(" & ")
+    ));
+    out.push_str(&format!(
+        "facelab & {} \\\\\n",
+        mean.iter()
+            .zip(&ci)
+            .map(|(m, c)| format!("{m:.6} $\\pm$ {c:.6}"))
+            .collect::<Vec<_>>()
+            .join(" & ")
+    ));
+    out.push_str(&format!(
+        "unified, same outputs & {} & \\\\\n",
+        umean
+            .iter()
+            .zip(&uci)
+            .map(|(m, c)| format!("{m:.6} $\\pm$ {c:.6}"))
+            .collect::<Vec<_>>()
+            .join(" & ")
+    ));
+    out.push_str("\\hline\n\\end{tabular}\n");
+    out
+}
+
+fn capitalize(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map(|f| f.to_uppercase().collect::<String>() + c.as_str())
+        .unwrap_or_default()
+}
+
+fn sanitize(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_.=".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+fn git(args: &[&str]) -> Option<String> {
+    let out = std::process::Command::new("git").args(args).output().ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+/// A new `run-NNNN` folder; concurrent runs each get their own.
+fn new_run_dir(experiment_dir: &Path) -> Result<PathBuf> {
+    std::fs::create_dir_all(experiment_dir)
+        .with_context(|| format!("{}: cannot create", experiment_dir.display()))?;
+    let mut n = std::fs::read_dir(experiment_dir)?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            e.file_name()
+                .to_str()?
+                .strip_prefix("run-")?
+                .parse::<u32>()
+                .ok()
+        })
+        .max()
+        .unwrap_or(0);
+    loop {
+        n += 1;
+        let dir = experiment_dir.join(format!("run-{n:04}"));
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok(dir),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e).with_context(|| format!("{}: cannot create", dir.display())),
+        }
+    }
+}
+
+fn point_latest(experiment_dir: &Path, run: &Path) -> Result<()> {
+    let name = run.file_name().context("run folder has a name")?;
+    let tmp = experiment_dir.join(format!(".latest-{}", std::process::id()));
+    let _ = std::fs::remove_file(&tmp);
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(name, &tmp)?;
+    #[cfg(not(unix))]
+    std::fs::write(&tmp, name.to_string_lossy().as_bytes())?;
+    std::fs::rename(&tmp, experiment_dir.join("latest"))?;
+    Ok(())
+}
+
+/// Runs every cell of a spec file.
+pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
+    let cells = spec::load(spec_path, &opts.sets)?;
+    let a = assets()?;
+    let cache = Cache::new(&opts.results.join(".cache"));
+    let experiment = cells[0].spec.experiment.clone();
+    let experiment_dir = opts.results.join(&experiment);
+    let out_root = opts
+        .results
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let run_dir = new_run_dir(&experiment_dir)?;
+    let mut records = Vec::new();
+    let mut outputs: BTreeMap<String, String> = BTreeMap::new();
+    let write =
+        |rel: String, bytes: Vec<u8>, outputs: &mut BTreeMap<String, String>| -> Result<()> {
+            let path = run_dir.join(&rel);
+            write_atomic(&path, &bytes)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            outputs.insert(rel, cache::sha256(&bytes));
+            Ok(())
+        };
+    let mut sweep_rows: Vec<(String, Vec<Row>)> = Vec::new();
+    for cell in &cells {
+        let prefix = if cells.len() > 1 {
+            format!("{}/", sanitize(&cell.name))
+        } else {
+            String::new()
+        };
+        write(
+            format!("{prefix}spec.toml"),
+            spec::to_toml(&cell.spec.values).into_bytes(),
+            &mut outputs,
+        )?;
+        let result = run_cell(cell, &a, &cache, &mut records)?;
+        write(
+            format!("{prefix}table1.csv"),
+            table1_csv(&result.rows).into_bytes(),
+            &mut outputs,
+        )?;
+        let mut curves = String::from("seed,network,epoch,train_mse,test_mse\n");
+        for ((seed, network), c) in &result.curves {
+            for (i, (tr, te)) in c.train.iter().zip(&c.test).enumerate() {
+                curves.push_str(&format!("{seed},{},{},{tr},{te}\n", network.name(), i + 1));
+            }
+        }
+        write(
+            format!("{prefix}curves.csv"),
+            curves.into_bytes(),
+            &mut outputs,
+        )?;
+        if cells.len() == 1 {
+            let report = &cell.spec.report_prefix;
+            let tables = out_root.join("paper-tables");
+            let md = table1_markdown(&result.rows, &cell.spec, result.samples);
+            write_atomic(&tables.join(format!("{report}table1.md")), md.as_bytes())?;
+            write_atomic(
+                &tables.join(format!("{report}table1.tex")),
+                table1_tex(&result.rows).as_bytes(),
+            )?;
+            let figures = out_root.join("figures").join(format!("{report}table1"));
+            table1_figures(&figures, &result)?;
+        }
+        sweep_rows.push((cell.name.clone(), result.rows));
+    }
+    if cells.len() > 1 {
+        let md = sweep_markdown(&experiment, &sweep_rows);
+        write(
+            format!("{experiment}.csv"),
+            sweep_csv(&sweep_rows).into_bytes(),
+            &mut outputs,
+        )?;
+        write_atomic(
+            &out_root
+                .join("paper-tables")
+                .join(format!("{experiment}.md")),
+            md.as_bytes(),
+        )?;
+    }
+    let manifest = serde_json::json!({
+        "facelab_version": env!("CARGO_PKG_VERSION"),
+        "git_revision": git(&["rev-parse", "HEAD"]).unwrap_or_else(|| "unknown".into()),
+        "git_dirty": git(&["status", "--porcelain"]).map(|s| !s.is_empty()),
+        "spec": spec_path.display().to_string(),
+        "sets": opts.sets,
+        "experiment": experiment,
+        "seeds": cells[0].spec.seeds,
+        "threads": opts.threads,
+        "stages": records.iter().map(|r| serde_json::json!({
+            "cell": r.cell, "stage": r.stage, "key": r.key, "hit": r.hit, "seconds": r.seconds,
+        })).collect::<Vec<_>>(),
+        "outputs": outputs,
+    });
+    write_atomic(
+        &run_dir.join("manifest.json"),
+        serde_json::to_string_pretty(&manifest)?.as_bytes(),
+    )?;
+    point_latest(&experiment_dir, &run_dir)?;
+    Ok(RunSummary {
+        dir: run_dir,
+        stages: records,
+        outputs,
+    })
+}
+
+fn table1_figures(dir: &Path, result: &CellResult) -> Result<()> {
+    use crate::report::figures::{grouped_bars, log_curves, Series, PALETTE};
+    let first_seed = result.curves.first().map(|((s, _), _)| *s).unwrap_or(1);
+    let mut series = Vec::new();
+    for (i, ((seed, network), c)) in result.curves.iter().enumerate() {
+        if *seed != first_seed {
+            continue;
+        }
+        let color = PALETTE[i % PALETTE.len()];
+        series.push(Series {
+            label: format!("{} test", network.name()),
+            values: c.test.clone(),
+            color,
+            dashed: false,
+        });
+        if *network == Network::Unified {
+            series.push(Series {
+                label: "unified train".into(),
+                values: c.train.clone(),
+                color,
+                dashed: true,
+            });
+        }
+    }
+    log_curves(
+        &dir.join("loss_curves.png"),
+        &format!("Training curves (seed {first_seed})"),
+        "MSE",
+        &series,
+    )?;
+    let (mean, _, _, _) = summary(&result.rows);
+    let cats: Vec<String> = table1::ORDER
+        .iter()
+        .map(|e| capitalize(e.name()))
+        .chain(std::iter::once("All".into()))
+        .collect();
+    grouped_bars(
+        &dir.join("table1_bars.png"),
+        "Table 1: test MSE",
+        "MSE",
+        &cats,
+        &[
+            ("Zeng et al.".into(), PALETTE[5], table1::PAPER.to_vec()),
+            ("facelab (mean over seeds)".into(), PALETTE[1], mean),
+        ],
+    )
+}
+
+fn sweep_csv(rows: &[(String, Vec<Row>)]) -> String {
+    let mut out = String::from("cell,mse_all_mean,mse_all_ci95,mse_per_expression_mean\n");
+    for (name, r) in rows {
+        let all: Vec<f64> = r.iter().map(|x| x.all).collect();
+        let per: Vec<f64> = r.iter().map(|x| stats::mean(&x.per_expression)).collect();
+        out.push_str(&format!(
+            "\"{name}\",{},{},{}\n",
+            fmt(stats::mean(&all)),
+            fmt(stats::ci95(&all)),
+            fmt(stats::mean(&per))
+        ));
+    }
+    out
+}
+
+fn sweep_markdown(experiment: &str, rows: &[(String, Vec<Row>)]) -> String {
+    let mut out = format!(
+        "# {experiment}: Table 1 over a sweep\n\n| cell | MSE_All (unified) | mean of per-expression MSEs |\n|---|---|---|\n"
+    );
+    for (name, r) in rows {
+        let all: Vec<f64> = r.iter().map(|x| x.all).collect();
+        let per: Vec<f64> = r.iter().map(|x| stats::mean(&x.per_expression)).collect();
+        out.push_str(&format!(
+            "| {name} | {:.6} ± {:.6} | {:.6} ± {:.6} |\n",
+            stats::mean(&all),
+            stats::ci95(&all),
+            stats::mean(&per),
+            stats::ci95(&per)
+        ));
+    }
+    out
+}
+
+/// `facelab status`: which stages of each cell are cached.
+pub fn status(
+    spec_path: &Path,
+    sets: &[String],
+    results: &Path,
+) -> Result<Vec<(String, String, bool)>> {
+    let cells = spec::load(spec_path, sets)?;
+    let a = assets()?;
+    let cache = Cache::new(&results.join(".cache"));
+    let mut out = Vec::new();
+    for cell in &cells {
+        let k = keys(&cell.spec, &a);
+        let label = |s: &str| {
+            if cell.name.is_empty() {
+                s.to_string()
+            } else {
+                format!("{} [{}]", s, cell.name)
+            }
+        };
+        if let Some(b) = &k.basis {
+            out.push((label("basis"), b.clone(), cache.has("basis", b)));
+        }
+        out.push((
+            label("dataset"),
+            k.dataset.clone(),
+            cache.has("dataset", &k.dataset),
+        ));
+        for ((seed, network), key) in &k.train {
+            out.push((
+                label(&format!("train {} seed {seed}", network.name())),
+                key.clone(),
+                cache.has("train", key),
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// `facelab verify`: reruns a run's resolved specs from scratch in a temporary folder and
+/// compares the hashes of every CSV. Returns the files that differ.
+pub fn verify(run_dir: &Path, threads: usize) -> Result<Vec<String>> {
+    let manifest: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(run_dir.join("manifest.json"))
+            .with_context(|| format!("{}: no manifest.json", run_dir.display()))?,
+    )?;
+    let outputs = manifest["outputs"]
+        .as_object()
+        .context("manifest has no outputs")?;
+    let spec_file = PathBuf::from(manifest["spec"].as_str().context("manifest has no spec")?);
+    let sets: Vec<String> = manifest["sets"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .filter_map(|s| s.as_str().map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    let tmp = std::env::temp_dir().join(format!("facelab-verify-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    let summary = run(
+        &spec_file,
+        &RunOptions {
+            results: tmp.join("results"),
+            sets,
+            threads,
+        },
+    )?;
+    let mut differ = Vec::new();
+    for (name, hash) in outputs {
+        if !name.ends_with(".csv") {
+            continue;
+        }
+        if summary.outputs.get(name).map(String::as_str) != hash.as_str() {
+            differ.push(name.clone());
+        }
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+    Ok(differ)
+}

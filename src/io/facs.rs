@@ -1,0 +1,112 @@
+//! FACS maps for Table 1 (`experiments/expression_aus.csv`, `experiments/au_muscles.csv`):
+//! which AUs make each expression and which model controls make each AU. Errors name the
+//! file and line.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use crate::observe::au::{au_index, AU_COUNT};
+use crate::sim::expression::Expression;
+
+use super::expressions::resolve_control;
+
+pub const DEFAULT_EXPRESSION_AUS: &str = "experiments/expression_aus.csv";
+pub const DEFAULT_AU_MUSCLES: &str = "experiments/au_muscles.csv";
+
+/// `rel` in the working folder, else in the crate root.
+pub fn data_path(rel: &str) -> PathBuf {
+    let local = PathBuf::from(rel);
+    if local.exists() {
+        local
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum FacsFileError {
+    #[error("{path}: {source}")]
+    Csv { path: PathBuf, source: csv::Error },
+    #[error("{path}:{line}: {message}")]
+    Row {
+        path: PathBuf,
+        line: u64,
+        message: String,
+    },
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct FacsMaps {
+    /// Per expression (in `Expression::ALL` order): AU indices, sorted.
+    pub expression_aus: Vec<Vec<usize>>,
+    /// Per AU: control indices, sorted.
+    pub au_controls: Vec<Vec<usize>>,
+}
+
+impl FacsMaps {
+    /// The controls an expression's network predicts: the union over its AUs.
+    pub fn expression_controls(&self, e: Expression) -> Vec<usize> {
+        let set: BTreeSet<usize> = self.expression_aus[e as usize]
+            .iter()
+            .flat_map(|&au| self.au_controls[au].iter().copied())
+            .collect();
+        set.into_iter().collect()
+    }
+}
+
+fn rows(path: &Path) -> Result<Vec<(u64, Vec<String>)>, FacsFileError> {
+    let err = |source| FacsFileError::Csv {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .map_err(err)?;
+    let mut out = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(err)?;
+        let line = record.position().map_or(0, |p| p.line());
+        out.push((line, record.iter().map(|s| s.trim().to_string()).collect()));
+    }
+    Ok(out)
+}
+
+pub fn read_facs(expression_aus: &Path, au_muscles: &Path) -> Result<FacsMaps, FacsFileError> {
+    let mut ex: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); Expression::ALL.len()];
+    for (line, r) in rows(expression_aus)? {
+        let row_err = |message: String| FacsFileError::Row {
+            path: expression_aus.to_path_buf(),
+            line,
+            message,
+        };
+        let e: Expression = r[0].parse().map_err(|e| row_err(format!("{e}")))?;
+        let au = au_index(&r[1]).ok_or_else(|| row_err(format!("unknown AU `{}`", r[1])))?;
+        ex[e as usize].insert(au);
+    }
+    let mut au: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); AU_COUNT];
+    for (line, r) in rows(au_muscles)? {
+        let row_err = |message: String| FacsFileError::Row {
+            path: au_muscles.to_path_buf(),
+            line,
+            message,
+        };
+        let a = au_index(&r[0]).ok_or_else(|| row_err(format!("unknown AU `{}`", r[0])))?;
+        for c in resolve_control(&r[1]).map_err(row_err)? {
+            au[a].insert(c);
+        }
+    }
+    for (e, aus) in Expression::ALL.iter().zip(&ex) {
+        if aus.is_empty() {
+            return Err(FacsFileError::Row {
+                path: expression_aus.to_path_buf(),
+                line: 0,
+                message: format!("{e} has no AUs"),
+            });
+        }
+    }
+    Ok(FacsMaps {
+        expression_aus: ex.into_iter().map(|s| s.into_iter().collect()).collect(),
+        au_controls: au.into_iter().map(|s| s.into_iter().collect()).collect(),
+    })
+}

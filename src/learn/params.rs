@@ -1,0 +1,73 @@
+//! Network and training parameters (paper 4.1, 4.3): what a `[model]` and `[train]` section
+//! resolve to.
+
+/// Per-AU input normalization, fitted on the training inputs and stored with the model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Normalization {
+    None,
+    MinMax,
+    ZScore,
+}
+
+impl Normalization {
+    pub const NAMES: [&'static str; 3] = ["none", "minmax", "zscore"];
+
+    pub fn parse(s: &str) -> Option<Normalization> {
+        match s {
+            "none" => Some(Normalization::None),
+            "minmax" => Some(Normalization::MinMax),
+            "zscore" => Some(Normalization::ZScore),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Normalization::None => "none",
+            Normalization::MinMax => "minmax",
+            Normalization::ZScore => "zscore",
+        }
+    }
+}
+
+/// The MLP's hidden layers (paper 4.1: 4 x 100, ReLU; footnote 1 chose it by test MSE).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelParams {
+    /// Hidden layers. Default 4.
+    pub layers: usize,
+    /// Neurons per hidden layer. Default 100.
+    pub width: usize,
+}
+
+impl Default for ModelParams {
+    fn default() -> Self {
+        ModelParams {
+            layers: 4,
+            width: 100,
+        }
+    }
+}
+
+/// Training (paper 4.3): Adam, MSE loss.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrainParams {
+    /// Adam step size. Default 0.01.
+    pub learning_rate: f64,
+    /// Pairs per step. Default 32.
+    pub batch_size: usize,
+    /// Passes over the training pairs. Default 100.
+    pub epochs: usize,
+    /// Input normalization. Default none (the paper feeds raw AUs).
+    pub normalization: Normalization,
+}
+
+impl Default for TrainParams {
+    fn default() -> Self {
+        TrainParams {
+            learning_rate: 0.01,
+            batch_size: 32,
+            epochs: 100,
+            normalization: Normalization::None,
+        }
+    }
+}

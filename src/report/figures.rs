@@ -1,0 +1,183 @@
+//! Plots with plotters, drawn into memory and saved as PNG atomically. Text uses DejaVu Sans
+//! embedded in the binary (`assets/fonts/`), so no system font is needed.
+
+use std::path::Path;
+use std::sync::Once;
+
+use anyhow::{anyhow, Result};
+use plotters::prelude::*;
+
+const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+
+fn register_font() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+    });
+}
+
+/// A named curve.
+pub struct Series {
+    pub label: String,
+    pub values: Vec<f64>,
+    pub color: RGBColor,
+    pub dashed: bool,
+}
+
+pub const PALETTE: [RGBColor; 7] = [
+    RGBColor(0, 0, 0),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    RGBColor(0, 158, 115),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 114, 178),
+    RGBColor(204, 121, 167),
+];
+
+fn save(buffer: Vec<u8>, (w, h): (u32, u32), path: &Path) -> Result<()> {
+    let image = image::RgbImage::from_raw(w, h, buffer).ok_or_else(|| anyhow!("bad buffer"))?;
+    super::save_png(&image, path)
+}
+
+/// Curves over epochs on a log-scaled y axis.
+pub fn log_curves(path: &Path, title: &str, y_label: &str, series: &[Series]) -> Result<()> {
+    register_font();
+    let size = (960u32, 640u32);
+    let mut buffer = vec![255u8; (size.0 * size.1 * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, size).into_drawing_area();
+        root.fill(&WHITE)?;
+        let epochs = series
+            .iter()
+            .map(|s| s.values.len())
+            .max()
+            .unwrap_or(1)
+            .max(2);
+        let positive = series
+            .iter()
+            .flat_map(|s| s.values.iter().copied())
+            .filter(|v| *v > 0.0 && v.is_finite());
+        let lo = positive.clone().fold(f64::INFINITY, f64::min).max(1e-12);
+        let hi = positive.fold(0.0f64, f64::max).max(lo * 10.0);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 26))
+            .margin(16)
+            .x_label_area_size(50)
+            .y_label_area_size(90)
+            .build_cartesian_2d(1f64..epochs as f64, (lo * 0.8..hi * 1.25).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("epoch")
+            .y_desc(y_label)
+            .label_style(("sans-serif", 18))
+            .axis_desc_style(("sans-serif", 20))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .draw()?;
+        for s in series {
+            let points: Vec<(f64, f64)> = s
+                .values
+                .iter()
+                .enumerate()
+                .filter(|(_, v)| **v > 0.0)
+                .map(|(i, v)| ((i + 1) as f64, *v))
+                .collect();
+            let style = ShapeStyle::from(&s.color).stroke_width(2);
+            let drawn = if s.dashed {
+                chart.draw_series(DashedLineSeries::new(points, 8, 5, style))?
+            } else {
+                chart.draw_series(LineSeries::new(points, style))?
+            };
+            let color = s.color;
+            drawn.label(s.label.clone()).legend(move |(x, y)| {
+                PathElement::new([(x, y), (x + 24, y)], color.stroke_width(3))
+            });
+        }
+        chart
+            .configure_series_labels()
+            .label_font(("sans-serif", 17))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()?;
+        root.present()?;
+    }
+    save(buffer, size, path)
+}
+
+/// Grouped bars: for each category, one bar per group (e.g. paper vs facelab), log y axis.
+pub fn grouped_bars(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    categories: &[String],
+    groups: &[(String, RGBColor, Vec<f64>)],
+) -> Result<()> {
+    register_font();
+    let size = (960u32, 600u32);
+    let mut buffer = vec![255u8; (size.0 * size.1 * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, size).into_drawing_area();
+        root.fill(&WHITE)?;
+        let values = groups
+            .iter()
+            .flat_map(|g| g.2.iter().copied())
+            .filter(|v| *v > 0.0);
+        let lo = values.clone().fold(f64::INFINITY, f64::min).max(1e-12);
+        let hi = values.fold(0.0f64, f64::max).max(lo * 10.0);
+        let n = categories.len();
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 26))
+            .margin(16)
+            .x_label_area_size(50)
+            .y_label_area_size(90)
+            .build_cartesian_2d(0f64..n as f64, (lo * 0.5..hi * 2.0).log_scale())?;
+        let cats = categories.to_vec();
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(n * 2 + 1)
+            .x_label_formatter(&move |x| {
+                let i = x.floor() as usize;
+                if (x - x.floor() - 0.5).abs() < 1e-6 && i < cats.len() {
+                    cats[i].clone()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc(y_label)
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .label_style(("sans-serif", 18))
+            .axis_desc_style(("sans-serif", 20))
+            .draw()?;
+        let width = 0.8 / groups.len() as f64;
+        for (g, (label, color, vals)) in groups.iter().enumerate() {
+            let color = *color;
+            chart
+                .draw_series(
+                    vals.iter()
+                        .enumerate()
+                        .filter(|(_, v)| **v > 0.0)
+                        .map(|(i, v)| {
+                            let x0 = i as f64 + 0.1 + g as f64 * width;
+                            Rectangle::new(
+                                [(x0, lo * 0.5), (x0 + width * 0.95, *v)],
+                                color.filled(),
+                            )
+                        }),
+                )?
+                .label(label.clone())
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 6), (x + 16, y + 6)], color.filled())
+                });
+        }
+        chart
+            .configure_series_labels()
+            .label_font(("sans-serif", 17))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()?;
+        root.present()?;
+    }
+    save(buffer, size, path)
+}

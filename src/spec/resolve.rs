@@ -1,0 +1,431 @@
+//! The resolved layer: reads the raw tree into the parameter types of each stage, checking
+//! types and ranges, filling defaults, and rejecting keys nobody reads (with the nearest
+//! valid name suggested). Sweeps expand here into named cells.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use super::raw::{set_path, Node, Origin, Value};
+use super::SpecError;
+use crate::experiments::dataset::{DatasetParams, SolveStart};
+use crate::learn::params::{ModelParams, Normalization, TrainParams};
+use crate::observe::ObserverNoise;
+use crate::sim::controls::edit_distance;
+
+/// Everything a run needs, validated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Spec {
+    /// `experiment`; default the file's stem. Names `results/<experiment>/`.
+    pub experiment: String,
+    /// Master seeds; each runs the whole pipeline. Default [1].
+    pub seeds: Vec<u64>,
+    /// Which tables to make: "table1". Default ["table1"].
+    pub tables: Vec<String>,
+    pub dataset: DatasetParams,
+    pub observer: ObserverNoise,
+    pub model: ModelParams,
+    pub train: TrainParams,
+    /// Prefix of the paper-table and figure names (`report.prefix`), so a smoke or test run
+    /// does not overwrite the committed `paper-tables/table1.md`. Default "".
+    pub report_prefix: String,
+    /// Every value read, with defaults filled in, by dotted key.
+    pub values: BTreeMap<String, toml::Value>,
+}
+
+/// One point of a sweep grid (the only one when there is no `[sweep]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cell {
+    /// `key=value` pairs of this cell joined by `,`, or empty without a sweep.
+    pub name: String,
+    pub spec: Spec,
+}
+
+/// Typed, recorded access to the raw tree.
+struct Reader<'a> {
+    tree: &'a BTreeMap<String, Node>,
+    file: &'a Path,
+    known: BTreeSet<String>,
+    values: BTreeMap<String, toml::Value>,
+}
+
+fn lookup<'a>(tree: &'a BTreeMap<String, Node>, key: &str) -> Option<&'a Node> {
+    let mut parts = key.split('.');
+    let mut node = tree.get(parts.next()?)?;
+    for part in parts {
+        match &node.value {
+            Value::Table(t) => node = t.get(part)?,
+            _ => return None,
+        }
+    }
+    Some(node)
+}
+
+impl<'a> Reader<'a> {
+    fn invalid(&self, node: &Node, key: &str, message: String) -> SpecError {
+        SpecError::Invalid {
+            origin: node.origin.clone(),
+            key: key.to_string(),
+            message,
+        }
+    }
+
+    fn get(&mut self, key: &str) -> Option<&'a Node> {
+        self.known.insert(key.to_string());
+        lookup(self.tree, key)
+    }
+
+    fn float(
+        &mut self,
+        key: &str,
+        default: f64,
+        valid: &dyn Fn(f64) -> Option<String>,
+    ) -> Result<f64, SpecError> {
+        let value = match self.get(key) {
+            None => default,
+            Some(node) => {
+                let v = match node.value {
+                    Value::Float(x) => x,
+                    Value::Integer(i) => i as f64,
+                    ref other => {
+                        return Err(self.invalid(
+                            node,
+                            key,
+                            format!("must be a number, not {}", other.type_name()),
+                        ))
+                    }
+                };
+                if let Some(message) = valid(v) {
+                    return Err(self.invalid(node, key, message));
+                }
+                v
+            }
+        };
+        self.values.insert(key.into(), toml::Value::Float(value));
+        Ok(value)
+    }
+
+    fn integer(&mut self, key: &str, default: i64, min: i64, max: i64) -> Result<i64, SpecError> {
+        let value = match self.get(key) {
+            None => default,
+            Some(node) => match node.value {
+                Value::Integer(i) if (min..=max).contains(&i) => i,
+                Value::Integer(i) => {
+                    return Err(self.invalid(node, key, format!("= {i} is outside [{min}, {max}]")))
+                }
+                ref other => {
+                    return Err(self.invalid(
+                        node,
+                        key,
+                        format!("must be an integer, not {}", other.type_name()),
+                    ))
+                }
+            },
+        };
+        self.values.insert(key.into(), toml::Value::Integer(value));
+        Ok(value)
+    }
+
+    fn choice(&mut self, key: &str, default: &str, allowed: &[&str]) -> Result<String, SpecError> {
+        let value = match self.get(key) {
+            None => default.to_string(),
+            Some(node) => match &node.value {
+                Value::String(s) if allowed.contains(&s.as_str()) => s.clone(),
+                Value::String(s) => {
+                    return Err(self.invalid(
+                        node,
+                        key,
+                        format!("= \"{s}\" is not one of {}", allowed.join(", ")),
+                    ))
+                }
+                other => {
+                    return Err(self.invalid(
+                        node,
+                        key,
+                        format!("must be a string, not {}", other.type_name()),
+                    ))
+                }
+            },
+        };
+        self.values
+            .insert(key.into(), toml::Value::String(value.clone()));
+        Ok(value)
+    }
+
+    fn list(&mut self, key: &str, default: Vec<toml::Value>) -> Result<Vec<&'a Node>, SpecError> {
+        match self.get(key) {
+            None => {
+                self.values.insert(key.into(), toml::Value::Array(default));
+                Ok(Vec::new())
+            }
+            Some(node) => match &node.value {
+                Value::Array(items) if !items.is_empty() => {
+                    self.values.insert(key.into(), node.to_toml());
+                    Ok(items.iter().collect())
+                }
+                Value::Array(_) => Err(self.invalid(node, key, "must not be empty".into())),
+                other => Err(self.invalid(
+                    node,
+                    key,
+                    format!("must be an array, not {}", other.type_name()),
+                )),
+            },
+        }
+    }
+
+    /// Every leaf in the tree must have been read.
+    fn finish(self) -> Result<BTreeMap<String, toml::Value>, SpecError> {
+        fn walk(
+            prefix: &str,
+            tree: &BTreeMap<String, Node>,
+            known: &BTreeSet<String>,
+        ) -> Result<(), SpecError> {
+            for (k, node) in tree {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                if known.contains(&key) {
+                    continue;
+                }
+                if let Value::Table(t) = &node.value {
+                    if known.iter().any(|n| n.starts_with(&format!("{key}."))) {
+                        walk(&key, t, known)?;
+                        continue;
+                    }
+                }
+                let nearest = known
+                    .iter()
+                    .min_by_key(|n| edit_distance(&key, n))
+                    .filter(|n| edit_distance(&key, n) <= key.len().max(4) / 2 + 1);
+                return Err(SpecError::Unknown {
+                    origin: node.origin.clone(),
+                    key,
+                    suggestion: nearest
+                        .map(|n| format!(" (did you mean `{n}`?)"))
+                        .unwrap_or_default(),
+                });
+            }
+            Ok(())
+        }
+        walk("", self.tree, &self.known)?;
+        let _ = self.file;
+        Ok(self.values)
+    }
+}
+
+/// Reads one cell's tree.
+pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecError> {
+    let mut r = Reader {
+        tree,
+        file,
+        known: BTreeSet::new(),
+        values: BTreeMap::new(),
+    };
+    let stem = file
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "experiment".into());
+    let experiment = match r.get("experiment") {
+        None => stem,
+        Some(node) => match &node.value {
+            Value::String(s)
+                if !s.is_empty()
+                    && s.chars()
+                        .all(|c| c.is_ascii_alphanumeric() || "-_".contains(c)) =>
+            {
+                s.clone()
+            }
+            _ => {
+                return Err(r.invalid(
+                    node,
+                    "experiment",
+                    "must be a name of letters, digits, - and _".into(),
+                ))
+            }
+        },
+    };
+    r.values
+        .insert("experiment".into(), toml::Value::String(experiment.clone()));
+
+    let mut seeds = Vec::new();
+    for node in r.list("seeds", vec![toml::Value::Integer(1)])? {
+        match node.value {
+            Value::Integer(i) if i >= 0 => seeds.push(i as u64),
+            _ => return Err(r.invalid(node, "seeds", "must list non-negative integers".into())),
+        }
+    }
+    if seeds.is_empty() {
+        seeds.push(1);
+    }
+    let mut tables = Vec::new();
+    for node in r.list("tables", vec![toml::Value::String("table1".into())])? {
+        match &node.value {
+            Value::String(s) if s == "table1" => tables.push(s.clone()),
+            _ => return Err(r.invalid(node, "tables", "may list only \"table1\"".into())),
+        }
+    }
+    if tables.is_empty() {
+        tables.push("table1".into());
+    }
+
+    let d = DatasetParams::default();
+    let dataset = DatasetParams {
+        pairs_per_expression: r.integer(
+            "dataset.pairs_per_expression",
+            d.pairs_per_expression as i64,
+            2,
+            1_000_000,
+        )? as usize,
+        test_fraction: r.float("dataset.test_fraction", d.test_fraction, &|v| {
+            (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
+        })?,
+        subdivisions: r.integer("dataset.subdivisions", d.subdivisions as i64, 0, 2)? as u8,
+        tolerance: r.float("dataset.tolerance", d.tolerance, &|v| {
+            (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
+        })?,
+        start: SolveStart::parse(&r.choice("dataset.start", d.start.name(), &SolveStart::NAMES)?)
+            .expect("choice checked"),
+        seed: r.integer("dataset.seed", d.seed as i64, 0, i64::MAX)? as u64,
+    };
+    let nonneg = |v: f64| (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"));
+    let observer = ObserverNoise {
+        noise_sd: r.float("observer.noise_sd", 0.0, &nonneg)?,
+        gain_spread: r.float("observer.gain_spread", 0.0, &nonneg)?,
+    };
+    let m = ModelParams::default();
+    let model = ModelParams {
+        layers: r.integer("model.layers", m.layers as i64, 1, 16)? as usize,
+        width: r.integer("model.width", m.width as i64, 1, 4096)? as usize,
+    };
+    let t = TrainParams::default();
+    let train = TrainParams {
+        learning_rate: r.float("train.learning_rate", t.learning_rate, &|v| {
+            (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
+        })?,
+        batch_size: r.integer("train.batch_size", t.batch_size as i64, 1, 1_000_000)? as usize,
+        epochs: r.integer("train.epochs", t.epochs as i64, 1, 100_000)? as usize,
+        normalization: Normalization::parse(&r.choice(
+            "train.normalization",
+            t.normalization.name(),
+            &Normalization::NAMES,
+        )?)
+        .expect("choice checked"),
+    };
+    let report_prefix = match r.get("report.prefix") {
+        None => String::new(),
+        Some(node) => match &node.value {
+            Value::String(s)
+                if s.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_".contains(c)) =>
+            {
+                s.clone()
+            }
+            _ => {
+                return Err(r.invalid(
+                    node,
+                    "report.prefix",
+                    "must be letters, digits, - and _".into(),
+                ))
+            }
+        },
+    };
+    r.values.insert(
+        "report.prefix".into(),
+        toml::Value::String(report_prefix.clone()),
+    );
+    let values = r.finish()?;
+    Ok(Spec {
+        report_prefix,
+        experiment,
+        seeds,
+        tables,
+        dataset,
+        observer,
+        model,
+        train,
+        values,
+    })
+}
+
+/// Flattens `[sweep]` into dotted keys with their value lists.
+fn sweep_axes(sweep: &Node, prefix: &str, out: &mut Vec<(String, Node)>) -> Result<(), SpecError> {
+    match &sweep.value {
+        Value::Table(t) => {
+            for (k, v) in t {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                sweep_axes(v, &key, out)?;
+            }
+            Ok(())
+        }
+        Value::Array(items) if !items.is_empty() => {
+            out.push((prefix.to_string(), sweep.clone()));
+            Ok(())
+        }
+        _ => Err(SpecError::Invalid {
+            origin: sweep.origin.clone(),
+            key: format!("sweep.{prefix}"),
+            message: "must be a non-empty list of values".into(),
+        }),
+    }
+}
+
+/// Expands `[sweep]` as a grid (keys in sorted order, values in file order) and resolves each
+/// cell. A sweep key that no stage reads is an unknown key at the sweep's line.
+pub fn cells(mut tree: BTreeMap<String, Node>, file: &Path) -> Result<Vec<Cell>, SpecError> {
+    let Some(sweep) = tree.remove("sweep") else {
+        return Ok(vec![Cell {
+            name: String::new(),
+            spec: resolve(&tree, file)?,
+        }]);
+    };
+    let mut axes = Vec::new();
+    sweep_axes(&sweep, "", &mut axes)?;
+    let mut grid: Vec<Vec<(String, Node)>> = vec![Vec::new()];
+    for (key, list) in &axes {
+        let Value::Array(items) = &list.value else {
+            unreachable!("sweep_axes keeps arrays")
+        };
+        let mut next = Vec::new();
+        for cell in &grid {
+            for item in items {
+                let mut c = cell.clone();
+                let origin = match &item.origin {
+                    Origin::File { path, line, column } => Origin::Sweep {
+                        path: path.clone(),
+                        line: *line,
+                        column: *column,
+                    },
+                    other => other.clone(),
+                };
+                c.push((
+                    key.clone(),
+                    Node {
+                        value: item.value.clone(),
+                        origin,
+                    },
+                ));
+                next.push(c);
+            }
+        }
+        grid = next;
+    }
+    let mut out = Vec::with_capacity(grid.len());
+    for cell in grid {
+        let mut t = tree.clone();
+        let mut name = Vec::new();
+        for (key, node) in cell {
+            name.push(format!("{key}={}", node.to_toml()));
+            set_path(&mut t, &key, node)?;
+        }
+        out.push(Cell {
+            name: name.join(","),
+            spec: resolve(&t, file)?,
+        });
+    }
+    Ok(out)
+}
