@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use anyhow::Context;
-use facelab::experiments::bench::{bench_observe, bench_solve};
+use facelab::experiments::bench::{bench_observe, bench_solve, bench_train};
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
 use facelab::experiments::observe;
 use facelab::experiments::run;
@@ -184,6 +184,19 @@ enum Bench {
         #[arg(long, default_value_t = SolveParams::default().tolerance)]
         tolerance: f64,
     },
+    /// Training loop speed of the unified network's shape (data in memory).
+    Train {
+        #[arg(long, default_value_t = 6000)]
+        pairs: usize,
+        #[arg(long, default_value_t = 100)]
+        epochs: usize,
+        /// Write the pairs as CSV for benches/train_torch.py
+        #[arg(long)]
+        export: Option<PathBuf>,
+        /// Threads for candle [default: 1, as the comparison with PyTorch uses]
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+    },
     /// Observer speed: one face (landmarks + AUs), and reading a large OpenFace file.
     Observe {
         /// Frames of the generated OpenFace file (714 columns)
@@ -339,6 +352,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Command::Bench { what } => match what {
+            Bench::Train {
+                pairs,
+                epochs,
+                export,
+                threads,
+            } => {
+                set_threads(Some(threads))?;
+                bench_train(
+                    pairs,
+                    epochs,
+                    export.as_deref(),
+                    &mut std::io::stdout().lock(),
+                )?
+            }
             Bench::Observe { frames } => bench_observe(frames, &mut std::io::stdout().lock())?,
             Bench::Solve {
                 face,

@@ -2,6 +2,7 @@
 //! observer, OpenFace files and the command line.
 
 mod cli;
+mod harness;
 mod observe;
 mod openface;
 mod sim;

@@ -314,3 +314,75 @@ pub fn bench_observe(frames: usize, out: &mut impl Write) -> Result<()> {
     out.flush()?;
     Ok(())
 }
+
+/// `facelab bench train`: the training loop alone (data in memory) for the unified network's
+/// shape, 17 -> 4 x 100 -> 56, on `pairs` synthetic pairs (uniform AUs on 0..5, targets a
+/// fixed smooth function of them), `epochs` epochs, batch 32. `export` writes the pairs as CSV
+/// (17 inputs then 56 targets per row) so another framework can train on the same data.
+pub fn bench_train(
+    pairs: usize,
+    epochs: usize,
+    export: Option<&std::path::Path>,
+    out: &mut impl Write,
+) -> Result<()> {
+    use crate::learn::{train, ModelParams, Pairs, TrainParams};
+    let mut rng = stream(1, "bench/train/data");
+    let mut data = Pairs {
+        inputs: 17,
+        outputs: 56,
+        ..Pairs::default()
+    };
+    let mix: Vec<f64> = (0..17 * 56).map(|_| rng.range(-1.0, 1.0)).collect();
+    for _ in 0..pairs {
+        let x: Vec<f64> = (0..17).map(|_| rng.range(0.0, 5.0)).collect();
+        data.x.extend(x.iter().map(|v| *v as f32));
+        for o in 0..56 {
+            let s: f64 = (0..17).map(|i| mix[o * 17 + i] * x[i]).sum::<f64>() / 17.0;
+            data.y.push((0.5 + 0.5 * s.tanh()) as f32);
+        }
+    }
+    if let Some(path) = export {
+        let mut text = String::new();
+        for r in 0..pairs {
+            let row: Vec<String> = data.x[r * 17..(r + 1) * 17]
+                .iter()
+                .chain(&data.y[r * 56..(r + 1) * 56])
+                .map(|v| format!("{v}"))
+                .collect();
+            text.push_str(&row.join(","));
+            text.push('\n');
+        }
+        std::fs::write(path, text)?;
+    }
+    let params = TrainParams {
+        epochs,
+        ..TrainParams::default()
+    };
+    let empty = Pairs {
+        inputs: 17,
+        outputs: 56,
+        ..Pairs::default()
+    };
+    let mut u = stream(1, "bench/train/init");
+    let mut uniform = || u.uniform();
+    let t = Instant::now();
+    let (_, curves) = train(
+        &data,
+        &empty,
+        &ModelParams::default(),
+        &params,
+        &mut uniform,
+    )?;
+    let secs = t.elapsed().as_secs_f64();
+    line(out, "train.unified", secs, "s")?;
+    line(out, "train.pairs", pairs as f64, "count")?;
+    line(out, "train.epochs", epochs as f64, "count")?;
+    line(
+        out,
+        "train.final_mse",
+        curves.train.last().copied().unwrap_or(f64::NAN),
+        "mse",
+    )?;
+    out.flush()?;
+    Ok(())
+}

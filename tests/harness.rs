@@ -1,0 +1,220 @@
+//! The harness: spec errors, byte-identical reruns across thread counts, the cache (hits,
+//! damaged entries, killed runs) and divergence, on `experiments/smoke.toml`.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use facelab::spec::{self, SpecError};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("facelab-harness-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn facelab(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .expect("run facelab")
+}
+
+fn smoke() -> String {
+    root().join("experiments/smoke.toml").display().to_string()
+}
+
+fn run_smoke(results: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["run", "experiments/smoke.toml", "--results"];
+    let r = results.display().to_string();
+    args.push(&r);
+    args.extend_from_slice(extra);
+    facelab(&args)
+}
+
+fn latest(results: &Path, file: &str) -> Vec<u8> {
+    std::fs::read(results.join("smoke/latest").join(file)).unwrap()
+}
+
+fn spec_error(text: &str, sets: &[&str]) -> String {
+    let dir = temp(&format!("spec-{}", text.len()));
+    std::fs::write(dir.join("base.toml"), "[train]\nepochs = 3\n").unwrap();
+    let path = dir.join("s.toml");
+    std::fs::write(&path, text).unwrap();
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    match spec::load(&path, &sets) {
+        Ok(_) => panic!("spec should fail:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn spec_errors_name_file_line_column_and_key() {
+    let e = spec_error(
+        "extends = \"base.toml\"\n[train]\nlearning_rat = 0.1\n",
+        &[],
+    );
+    assert!(
+        e.contains("s.toml:3:1")
+            && e.contains("train.learning_rat")
+            && e.contains("did you mean `train.learning_rate`"),
+        "{e}"
+    );
+    let e = spec_error("[train]\nepochs = \"many\"\n", &[]);
+    assert!(
+        e.contains("s.toml:2:1") && e.contains("must be an integer"),
+        "{e}"
+    );
+    let e = spec_error("[train]\nlearning_rate = -0.1\n", &[]);
+    assert!(
+        e.contains("train.learning_rate") && e.contains("must be positive"),
+        "{e}"
+    );
+    let e = spec_error("[train]\nbatch_size = 0\n", &[]);
+    assert!(
+        e.contains("train.batch_size") && e.contains("outside"),
+        "{e}"
+    );
+    let e = spec_error("[dataset]\ntest_fraction = 1.5\n", &[]);
+    assert!(
+        e.contains("dataset.test_fraction") && e.contains("(0, 1)"),
+        "{e}"
+    );
+    let e = spec_error("[sweep]\n\"train.epoch\" = [1, 2]\n", &[]);
+    assert!(
+        e.contains("s.toml:2") && e.contains("sweep") && e.contains("train.epoch"),
+        "{e}"
+    );
+    let e = spec_error("extends = \"missing.toml\"\n", &[]);
+    assert!(e.contains("extends") && e.contains("missing.toml"), "{e}");
+    let e = spec_error("seeds = [1]\n", &["train.epochs=-3"]);
+    assert!(e.contains("--set train.epochs=-3"), "{e}");
+
+    let dir = temp("cycle");
+    std::fs::write(dir.join("a.toml"), "extends = \"b.toml\"\n").unwrap();
+    std::fs::write(dir.join("b.toml"), "extends = \"a.toml\"\n").unwrap();
+    let e = spec::load(&dir.join("a.toml"), &[]).unwrap_err();
+    assert!(matches!(e, SpecError::Cycle(_)), "{e}");
+
+    // The CLI: message on stderr, non-zero exit, nothing run.
+    let out = facelab(&["check", &smoke(), "--set", "train.learning_rate=0"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("train.learning_rate") && err.contains("must be positive"),
+        "{err}"
+    );
+}
+
+#[test]
+fn sweeps_expand_into_named_cells() {
+    let cells = spec::load(&root().join("experiments/ablations/depth.toml"), &[]).unwrap();
+    assert_eq!(cells.len(), 18);
+    assert_eq!(cells[0].name, "model.layers=1,model.width=50");
+    assert_eq!(cells[17].spec.model.layers, 6);
+    assert_eq!(cells[17].spec.model.width, 200);
+    assert_eq!(cells[3].spec.train.learning_rate, 0.01);
+}
+
+#[test]
+fn same_spec_gives_the_same_bytes_across_threads_and_from_the_cache() {
+    let one = temp("threads1");
+    let two = temp("threads2");
+    let a = run_smoke(&one.join("results"), &["--threads", "1"]);
+    assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
+    let b = run_smoke(&two.join("results"), &["--threads", "2"]);
+    assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
+    for file in ["table1.csv", "curves.csv", "spec.toml"] {
+        assert_eq!(
+            latest(&one.join("results"), file),
+            latest(&two.join("results"), file),
+            "{file} differs between 1 and 2 threads"
+        );
+    }
+    assert_eq!(
+        std::fs::read(one.join("paper-tables/smoke_table1.md")).unwrap(),
+        std::fs::read(two.join("paper-tables/smoke_table1.md")).unwrap()
+    );
+
+    // A second run computes nothing and writes the same bytes.
+    let first = latest(&one.join("results"), "table1.csv");
+    let again = run_smoke(&one.join("results"), &["--threads", "2"]);
+    let stdout = String::from_utf8_lossy(&again.stdout);
+    assert!(stdout.contains("0 computed"), "{stdout}");
+    assert_eq!(latest(&one.join("results"), "table1.csv"), first);
+    let manifest = String::from_utf8(latest(&one.join("results"), "manifest.json")).unwrap();
+    assert!(!manifest.contains("\"hit\": false"), "{manifest}");
+
+    // A damaged cache entry is found and recomputed, with the same result.
+    let cache = one.join("results/.cache/dataset");
+    let entry = std::fs::read_dir(&cache)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let csv = entry.join("dataset.csv");
+    let bytes = std::fs::read(&csv).unwrap();
+    std::fs::write(&csv, &bytes[..bytes.len() / 2]).unwrap();
+    let healed = run_smoke(&one.join("results"), &[]);
+    assert!(
+        healed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&healed.stderr)
+    );
+    let manifest = String::from_utf8(latest(&one.join("results"), "manifest.json")).unwrap();
+    assert!(manifest.contains("\"stage\": \"dataset\"") && manifest.contains("\"hit\": false"));
+    assert_eq!(latest(&one.join("results"), "table1.csv"), first);
+    assert_eq!(std::fs::read(&csv).unwrap(), bytes);
+
+    // A diverging configuration names the epoch and fails (the dataset comes from the cache).
+    let bad = run_smoke(&one.join("results"), &["--set", "train.learning_rate=1e6"]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("diverged at epoch"), "{err}");
+}
+
+#[cfg(unix)]
+#[test]
+fn a_killed_run_resumes_and_finishes_with_the_same_outputs() {
+    let clean = temp("clean");
+    let killed = temp("killed");
+    let sets = ["--set", "dataset.pairs_per_expression=12"];
+    let ok = run_smoke(&clean.join("results"), &sets);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+
+    let results = killed.join("results");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(["run", "experiments/smoke.toml", "--results"])
+        .arg(&results)
+        .args(sets)
+        .current_dir(root())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    // No half-written file anywhere: every cache entry that exists verifies.
+    let resumed = run_smoke(&results, &sets);
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    for file in ["table1.csv", "curves.csv"] {
+        assert_eq!(
+            latest(&results, file),
+            latest(&clean.join("results"), file),
+            "{file}"
+        );
+    }
+}
