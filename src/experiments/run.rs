@@ -506,7 +506,7 @@ fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> String {
         "| facelab | {} |\n",
         mean.iter()
             .zip(&ci)
-            .map(|(m, c)| format!("{m:.6} ± {c:.6}"))
+            .map(|(m, c)| format!("{m:.2e} ± {c:.1e}"))
             .collect::<Vec<_>>()
             .join(" | ")
     ));
@@ -514,16 +514,16 @@ fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> String {
         "| facelab / paper | {} |\n",
         mean.iter()
             .zip(&table1::PAPER)
-            .map(|(m, p)| format!("{:.2}", m / p))
+            .map(|(m, p)| format!("{:.2e}", m / p))
             .collect::<Vec<_>>()
             .join(" | ")
     ));
     out.push_str(&format!(
-        "| unified network, same pairs and outputs | {} | {:.6} ± {:.6} |\n",
+        "| unified network, same pairs and outputs | {} | {:.2e} ± {:.1e} |\n",
         umean
             .iter()
             .zip(&uci)
-            .map(|(m, c)| format!("{m:.6} ± {c:.6}"))
+            .map(|(m, c)| format!("{m:.2e} ± {c:.1e}"))
             .collect::<Vec<_>>()
             .join(" | "),
         mean[6],
@@ -552,7 +552,7 @@ fn table1_tex(rows: &[Row]) -> String {
         "facelab & {} \\\\\n",
         mean.iter()
             .zip(&ci)
-            .map(|(m, c)| format!("{m:.6} $\\pm$ {c:.6}"))
+            .map(|(m, c)| format!("{m:.2e} $\\pm$ {c:.1e}"))
             .collect::<Vec<_>>()
             .join(" & ")
     ));
@@ -561,7 +561,7 @@ fn table1_tex(rows: &[Row]) -> String {
         umean
             .iter()
             .zip(&uci)
-            .map(|(m, c)| format!("{m:.6} $\\pm$ {c:.6}"))
+            .map(|(m, c)| format!("{m:.2e} $\\pm$ {c:.1e}"))
             .collect::<Vec<_>>()
             .join(" & ")
     ));
@@ -810,7 +810,7 @@ fn sweep_markdown(experiment: &str, rows: &[(String, Vec<Row>)]) -> String {
         let all: Vec<f64> = r.iter().map(|x| x.all).collect();
         let per: Vec<f64> = r.iter().map(|x| stats::mean(&x.per_expression)).collect();
         out.push_str(&format!(
-            "| {name} | {:.6} ± {:.6} | {:.6} ± {:.6} |\n",
+            "| {name} | {:.2e} ± {:.1e} | {:.2e} ± {:.1e} |\n",
             stats::mean(&all),
             stats::ci95(&all),
             stats::mean(&per),

@@ -68,6 +68,7 @@ pub fn log_curves(path: &Path, title: &str, y_label: &str, series: &[Series]) ->
         chart
             .configure_mesh()
             .x_desc("epoch")
+            .x_label_formatter(&|v| format!("{v:.0}"))
             .y_desc(y_label)
             .label_style(("sans-serif", 18))
             .axis_desc_style(("sans-serif", 20))
