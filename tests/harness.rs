@@ -218,3 +218,46 @@ fn a_killed_run_resumes_and_finishes_with_the_same_outputs() {
         );
     }
 }
+
+#[test]
+fn two_runs_at_once_share_a_results_folder_and_verify_reproduces_them() {
+    let dir = temp("concurrent");
+    let results = dir.join("results");
+    let r = results.display().to_string();
+    let spawn = || {
+        Command::new(env!("CARGO_BIN_EXE_facelab"))
+            .args([
+                "run",
+                "experiments/smoke.toml",
+                "--threads",
+                "1",
+                "--results",
+                &r,
+            ])
+            .current_dir(root())
+            .output()
+            .unwrap()
+    };
+    let (a, b) = std::thread::scope(|s| {
+        let a = s.spawn(spawn);
+        let b = s.spawn(spawn);
+        (a.join().unwrap(), b.join().unwrap())
+    });
+    assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
+    assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
+    let one = std::fs::read(results.join("smoke/run-0001/table1.csv")).unwrap();
+    let two = std::fs::read(results.join("smoke/run-0002/table1.csv")).unwrap();
+    assert_eq!(one, two);
+
+    let verify = facelab(&[
+        "verify",
+        &results.join("smoke/run-0001").display().to_string(),
+    ]);
+    let stdout = String::from_utf8_lossy(&verify.stdout);
+    assert!(
+        verify.status.success(),
+        "{}",
+        String::from_utf8_lossy(&verify.stderr)
+    );
+    assert!(stdout.contains("reproduced byte for byte"), "{stdout}");
+}
