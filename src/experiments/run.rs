@@ -712,6 +712,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 .join(format!("{experiment}.md")),
             md.as_bytes(),
         )?;
+        sweep_figure(&out_root.join("figures").join(&experiment), &sweep_rows)?;
     }
     let manifest = serde_json::json!({
         "facelab_version": env!("CARGO_PKG_VERSION"),
@@ -783,6 +784,54 @@ fn table1_figures(dir: &Path, result: &CellResult) -> Result<()> {
         &[
             ("Zeng et al.".into(), PALETTE[5], table1::PAPER.to_vec()),
             ("facelab (mean over seeds)".into(), PALETTE[1], mean),
+        ],
+    )
+}
+
+/// Bars of MSE_All and the mean per-expression MSE for each cell, labelled by its values.
+fn sweep_figure(dir: &Path, rows: &[(String, Vec<Row>)]) -> Result<()> {
+    use crate::report::figures::{grouped_bars, PALETTE};
+    let values_of = |name: &str, part: usize| -> String {
+        name.split(',')
+            .map(|kv| {
+                kv.split_once('=').map_or(kv.to_string(), |(k, v)| {
+                    if part == 0 {
+                        k.into()
+                    } else {
+                        v.into()
+                    }
+                })
+            })
+            .collect::<Vec<_>>()
+            .join(if part == 0 { " / " } else { "/" })
+    };
+    let labels: Vec<String> = rows.iter().map(|(name, _)| values_of(name, 1)).collect();
+    let all: Vec<f64> = rows
+        .iter()
+        .map(|(_, r)| stats::mean(&r.iter().map(|x| x.all).collect::<Vec<_>>()))
+        .collect();
+    let per: Vec<f64> = rows
+        .iter()
+        .map(|(_, r)| {
+            stats::mean(
+                &r.iter()
+                    .map(|x| stats::mean(&x.per_expression))
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    let keys = rows
+        .first()
+        .map(|(name, _)| values_of(name, 0))
+        .unwrap_or_default();
+    grouped_bars(
+        &dir.join("sweep.png"),
+        &format!("Test MSE by {keys}"),
+        "MSE (mean over seeds)",
+        &labels,
+        &[
+            ("unified, MSE_All".into(), PALETTE[0], all),
+            ("per-expression networks, mean".into(), PALETTE[1], per),
         ],
     )
 }

@@ -114,7 +114,7 @@ pub fn grouped_bars(
     groups: &[(String, RGBColor, Vec<f64>)],
 ) -> Result<()> {
     register_font();
-    let size = (960u32, 600u32);
+    let size = ((70 * categories.len() as u32).max(960), 600u32);
     let mut buffer = vec![255u8; (size.0 * size.1 * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buffer, size).into_drawing_area();
