@@ -210,6 +210,13 @@ fn a_killed_run_resumes_and_finishes_with_the_same_outputs() {
         "{}",
         String::from_utf8_lossy(&resumed.stderr)
     );
+    // The killed run's unfinished entries are gone.
+    for stage in std::fs::read_dir(results.join(".cache")).unwrap() {
+        for e in std::fs::read_dir(stage.unwrap().path()).unwrap() {
+            let name = e.unwrap().file_name().to_string_lossy().into_owned();
+            assert!(!name.starts_with(".tmp-"), "stale {name}");
+        }
+    }
     for file in ["table1.csv", "curves.csv"] {
         assert_eq!(
             latest(&results, file),

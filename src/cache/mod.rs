@@ -151,6 +151,32 @@ impl Cache {
         Ok(Entry { dir, files: sums })
     }
 
+    /// Removes temporary folders left by runs that were killed while writing an entry (their
+    /// process id, in the folder's name, is no longer running). Folders of live runs stay.
+    pub fn remove_stale(&self) {
+        let Ok(stages) = std::fs::read_dir(&self.root) else {
+            return;
+        };
+        for stage in stages.filter_map(Result::ok) {
+            let Ok(entries) = std::fs::read_dir(stage.path()) else {
+                continue;
+            };
+            for e in entries.filter_map(Result::ok) {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let pid = name
+                    .strip_prefix(".tmp-")
+                    .and_then(|rest| rest.split('-').next())
+                    .and_then(|p| p.parse::<u32>().ok());
+                if let Some(pid) = pid {
+                    let alive = Path::new(&format!("/proc/{pid}")).exists();
+                    if !alive && pid != std::process::id() {
+                        let _ = std::fs::remove_dir_all(e.path());
+                    }
+                }
+            }
+        }
+    }
+
     /// Whether a verified entry exists (for `facelab status`).
     pub fn has(&self, stage: &str, key: &str) -> bool {
         matches!(self.get(stage, key), Ok(Some(_)))

@@ -638,6 +638,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     let cells = spec::load(spec_path, &opts.sets)?;
     let a = assets()?;
     let cache = Cache::new(&opts.results.join(".cache"));
+    cache.remove_stale();
     let experiment = cells[0].spec.experiment.clone();
     let experiment_dir = opts.results.join(&experiment);
     let out_root = opts
