@@ -15,12 +15,7 @@ pub const DEFAULT_CALIBRATION: &str = "experiments/au_calibration.csv";
 
 /// The default calibration path, resolved against the crate root when not found locally.
 pub fn default_calibration_path() -> PathBuf {
-    let local = PathBuf::from(DEFAULT_CALIBRATION);
-    if local.exists() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(DEFAULT_CALIBRATION)
-    }
+    super::data_path(DEFAULT_CALIBRATION)
 }
 
 const HEADER: [&str; 5] = ["au", "controls", "target", "raw", "gain"];

@@ -12,12 +12,7 @@ pub const DEFAULT_EXPRESSIONS: &str = "experiments/expressions.csv";
 
 /// The default weights path, resolved against the crate root when not found locally.
 pub fn default_expressions_path() -> PathBuf {
-    let local = PathBuf::from(DEFAULT_EXPRESSIONS);
-    if local.exists() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(DEFAULT_EXPRESSIONS)
-    }
+    super::data_path(DEFAULT_EXPRESSIONS)
 }
 
 #[derive(Debug, thiserror::Error)]

@@ -5,6 +5,8 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
+pub use super::data_path;
+
 use crate::observe::au::{au_index, AU_COUNT};
 use crate::sim::expression::Expression;
 
@@ -12,16 +14,6 @@ use super::expressions::resolve_control;
 
 pub const DEFAULT_EXPRESSION_AUS: &str = "experiments/expression_aus.csv";
 pub const DEFAULT_AU_MUSCLES: &str = "experiments/au_muscles.csv";
-
-/// `rel` in the working folder, else in the crate root.
-pub fn data_path(rel: &str) -> PathBuf {
-    let local = PathBuf::from(rel);
-    if local.exists() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
-    }
-}
 
 #[derive(Debug, thiserror::Error)]
 pub enum FacsFileError {

@@ -11,12 +11,7 @@ pub const DEFAULT_MESH: &str = "assets/face/canonical_face.obj";
 /// The default mesh path, resolved against the crate root so the binary works from any
 /// directory of the checkout.
 pub fn default_mesh_path() -> PathBuf {
-    let local = PathBuf::from(DEFAULT_MESH);
-    if local.exists() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(DEFAULT_MESH)
-    }
+    super::data_path(DEFAULT_MESH)
 }
 
 #[derive(Debug, thiserror::Error)]
