@@ -50,6 +50,39 @@ impl FaceArgs {
     }
 }
 
+/// What to pose: an expression at a scale, then explicit activations.
+#[derive(clap::Args, Clone)]
+struct PoseArgs {
+    /// joy, sadness, anger, fear, disgust or surprise
+    #[arg(long)]
+    expression: Option<String>,
+    /// Expression scale s in [0, 1] (a = w_e * s)
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
+    /// Activations, e.g. zygomaticus_major_left=0.7,frontalis_medial_right=0.3
+    #[arg(long)]
+    activation: Option<String>,
+    /// Jaw rotation in [0, 1]
+    #[arg(long)]
+    jaw_rotation: Option<f64>,
+}
+
+impl PoseArgs {
+    fn request(&self) -> anyhow::Result<PoseRequest> {
+        Ok(PoseRequest {
+            expression: self.expression.as_ref().map(|e| e.parse()).transpose()?,
+            scale: self.scale,
+            activations: self
+                .activation
+                .as_ref()
+                .map(|a| parse_assignments(a))
+                .transpose()?
+                .unwrap_or_default(),
+            jaw_rotation: self.jaw_rotation,
+        })
+    }
+}
+
 #[derive(Clone, Copy, ValueEnum)]
 enum View {
     Frontal,
@@ -62,18 +95,8 @@ enum Command {
     Render {
         #[command(flatten)]
         face: FaceArgs,
-        /// joy, sadness, anger, fear, disgust or surprise
-        #[arg(long)]
-        expression: Option<String>,
-        /// Expression scale s in [0, 1] (a = w_e * s)
-        #[arg(long, default_value_t = 1.0)]
-        scale: f64,
-        /// Activations, e.g. zygomaticus_major_left=0.7,frontalis_medial_right=0.3
-        #[arg(long)]
-        activation: Option<String>,
-        /// Jaw rotation in [0, 1]
-        #[arg(long)]
-        jaw_rotation: Option<f64>,
+        #[command(flatten)]
+        pose: PoseArgs,
         /// Draw the muscles over the face, coloured by activation
         #[arg(long)]
         overlay: bool,
@@ -104,18 +127,8 @@ enum Command {
         /// Recompute `raw` and `gain` of the calibration table from the model and rewrite it
         #[arg(long)]
         calibrate: bool,
-        /// joy, sadness, anger, fear, disgust or surprise
-        #[arg(long)]
-        expression: Option<String>,
-        /// Expression scale s in [0, 1]
-        #[arg(long, default_value_t = 1.0)]
-        scale: f64,
-        /// Activations, e.g. zygomaticus_major_left=0.7
-        #[arg(long)]
-        activation: Option<String>,
-        /// Jaw rotation in [0, 1]
-        #[arg(long)]
-        jaw_rotation: Option<f64>,
+        #[command(flatten)]
+        pose: PoseArgs,
         /// An OpenFace CSV with 3D landmarks to observe
         #[arg(long, requires = "out")]
         openface: Option<PathBuf>,
@@ -209,25 +222,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Render {
             face,
-            expression,
-            scale,
-            activation,
-            jaw_rotation,
+            pose,
             overlay,
             view,
             width,
             height,
             out,
         } => {
-            let request = PoseRequest {
-                expression: expression.map(|e| e.parse()).transpose()?,
-                scale,
-                activations: activation
-                    .map(|a| parse_assignments(&a))
-                    .transpose()?
-                    .unwrap_or_default(),
-                jaw_rotation,
-            };
+            let request = pose.request()?;
             let options = RenderOptions {
                 width,
                 height,
@@ -248,10 +250,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             face,
             calibration,
             calibrate,
-            expression,
-            scale,
-            activation,
-            jaw_rotation,
+            pose,
             openface,
             neutral_frame,
             out,
@@ -275,15 +274,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 observe::print_agreement(&agreement, stdout)?;
                 println!("wrote {}", out.display());
             } else {
-                let request = PoseRequest {
-                    expression: expression.map(|e| e.parse()).transpose()?,
-                    scale,
-                    activations: activation
-                        .map(|a| parse_assignments(&a))
-                        .transpose()?
-                        .unwrap_or_default(),
-                    jaw_rotation,
-                };
+                let request = pose.request()?;
                 let source = face.source();
                 let model = source.model()?;
                 let a = request.activations(&source.weights()?)?;
