@@ -10,6 +10,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod cache;
+pub mod cohort;
 pub mod experiments;
 pub mod io;
 pub mod learn;

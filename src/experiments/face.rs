@@ -12,7 +12,7 @@ use crate::report::save_png;
 use crate::sim::controls::{control_names, JAW_ROTATION};
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::{
-    solve_from_rest, Activations, FaceModel, FaceParams, SolveParams, State, Workspace,
+    solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, State, Workspace,
 };
 
 /// Where the face comes from.
@@ -27,14 +27,25 @@ pub struct FaceSource {
 
 impl FaceSource {
     pub fn model(&self) -> Result<FaceModel> {
-        let path = self.mesh.clone().unwrap_or_else(default_mesh_path);
-        let mesh = read_obj(&path)?;
-        let params = FaceParams {
+        FaceModel::new(&self.mesh()?, self.params()).with_context(|| {
+            format!("{}: cannot build the face model", self.mesh_path().display())
+        })
+    }
+
+    fn mesh_path(&self) -> PathBuf {
+        self.mesh.clone().unwrap_or_else(default_mesh_path)
+    }
+
+    /// The base mesh (before subdivision, m).
+    pub fn mesh(&self) -> Result<Mesh> {
+        Ok(read_obj(&self.mesh_path())?)
+    }
+
+    pub fn params(&self) -> FaceParams {
+        FaceParams {
             subdivisions: self.subdivisions,
             ..FaceParams::default()
-        };
-        FaceModel::new(&mesh, params)
-            .with_context(|| format!("{}: cannot build the face model", path.display()))
+        }
     }
 
     pub fn weights(&self) -> Result<ExpressionWeights> {

@@ -6,3 +6,5 @@ pub mod face;
 pub mod observe;
 pub mod run;
 pub mod table1;
+pub mod table2;
+pub mod table2_stage;

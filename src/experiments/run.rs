@@ -23,6 +23,9 @@ use super::dataset::{self, Sample, SolveStart};
 use super::face::FaceSource;
 use super::observe::model_observer;
 use super::table1::{self, Network, Row};
+use super::table2;
+use super::table2_stage::{self, Table2Result};
+use crate::observe::AU_NAMES;
 use crate::cache::{self, Cache, Entry};
 use crate::io::atomic::write_atomic;
 use crate::io::calibration::{default_calibration_path, read_calibration};
@@ -33,7 +36,7 @@ use crate::learn::{self, Curves, Mlp};
 use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::geom::V3;
-use crate::sim::SolveParams;
+use crate::sim::{FaceModel, SolveParams};
 use crate::spec::{self, Cell, Spec};
 use crate::stats;
 
@@ -249,9 +252,41 @@ fn curves_from(text: &str) -> Curves {
 /// Everything one cell produced.
 struct CellResult {
     rows: Vec<Row>,
+    table2: Option<Table2Result>,
+    /// The first seed's unified network (safetensors) and the training AUs' per-AU
+    /// statistics, for `facelab transfer --model`.
+    unified: Vec<u8>,
+    training_aus: String,
     /// (seed, network) -> curves.
     curves: Vec<((u64, Network), Curves)>,
     samples: usize,
+}
+
+/// The linear basis of the cell's face (cached), when the spec solves from predictions.
+fn load_basis(
+    k: &Keys,
+    cache: &Cache,
+    model: &FaceModel,
+    spec: &Spec,
+    record: &mut dyn FnMut(&str, &str, bool, Instant),
+) -> Result<Option<LinearBasis>> {
+    let Some(key) = &k.basis else {
+        return Ok(None);
+    };
+    let t = Instant::now();
+    if let Some(e) = cache.get("basis", key)? {
+        let b = basis_from(&e.read("basis.bin")?)?;
+        record("basis", key, true, t);
+        return Ok(Some(b));
+    }
+    let params = SolveParams {
+        tolerance: spec.dataset.tolerance,
+        ..SolveParams::default()
+    };
+    let b = LinearBasis::build(model, &params).context("building the linear basis")?;
+    cache.put("basis", key, &[("basis.bin".into(), basis_bytes(&b))])?;
+    record("basis", key, false, t);
+    Ok(Some(b))
 }
 
 fn run_cell(
@@ -290,30 +325,7 @@ fn run_cell(
             let weights = source.weights()?;
             let calibration = read_calibration(&default_calibration_path())?.calibration();
             let observer = model_observer(&model, calibration)?;
-            let basis = match &k.basis {
-                None => None,
-                Some(key) => {
-                    let tb = Instant::now();
-                    Some(match cache.get("basis", key)? {
-                        Some(e) => {
-                            let b = basis_from(&e.read("basis.bin")?)?;
-                            record("basis", key, true, tb);
-                            b
-                        }
-                        None => {
-                            let params = SolveParams {
-                                tolerance: spec.dataset.tolerance,
-                                ..SolveParams::default()
-                            };
-                            let b = LinearBasis::build(&model, &params)
-                                .context("building the linear basis")?;
-                            cache.put("basis", key, &[("basis.bin".into(), basis_bytes(&b))])?;
-                            record("basis", key, false, tb);
-                            b
-                        }
-                    })
-                }
-            };
+            let basis = load_basis(&k, cache, &model, spec, &mut record)?;
             let total = spec.dataset.pairs_per_expression * 6;
             let progress = bar(total as u64, "dataset");
             let tick = || progress.inc(1);
@@ -387,6 +399,34 @@ fn run_cell(
     }
     progress.finish_and_clear();
 
+    let wants_table2 = spec.tables.iter().any(|t| t == "table2");
+    let calibration = read_calibration(&default_calibration_path())?.calibration();
+    let table2 = if wants_table2 {
+        let model = source.model()?;
+        let basis = load_basis(&k, cache, &model, spec, &mut record)?;
+        let unified = k
+            .train
+            .iter()
+            .filter(|((_, n), _)| *n == Network::Unified)
+            .map(|((seed, n), key)| (*seed, key.clone(), &nets[&(*seed, *n)]))
+            .collect();
+        let inputs = table2_stage::Inputs {
+            spec,
+            source: &source,
+            assets: format!("face={}\ndata={}\n", a.face, a.data),
+            dataset_key: &k.dataset,
+            basis_key: k.basis.as_deref(),
+            unified,
+            samples: &samples,
+            model: &model,
+            basis: basis.as_ref(),
+            calibration: &calibration,
+        };
+        Some(table2_stage::run(&inputs, cache, &mut record, &bar)?)
+    } else {
+        None
+    };
+    let unified = nets[&(spec.seeds[0], Network::Unified)].to_safetensors()?;
     let mut rows = Vec::new();
     for &seed in &spec.seeds {
         let split = table1::split(&samples, spec.dataset.test_fraction, seed);
@@ -400,9 +440,27 @@ fn run_cell(
     }
     Ok(CellResult {
         rows,
+        table2,
+        unified,
+        training_aus: training_aus_csv(&samples),
         curves,
         samples: samples.len(),
     })
+}
+
+/// Per AU: min, max, mean and SD over all training pairs (what Table 2 normalizes onto).
+fn training_aus_csv(samples: &[Sample]) -> String {
+    let mut out = String::from("au,min,max,mean,sd\n");
+    let n = samples.len().max(1) as f64;
+    for (k, name) in AU_NAMES.iter().enumerate() {
+        let v: Vec<f64> = samples.iter().map(|s| s.aus[k]).collect();
+        let mean = v.iter().sum::<f64>() / n;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        out.push_str(&format!("{name},{lo},{hi},{mean},{sd}\n"));
+    }
+    out
 }
 
 fn fmt(v: f64) -> String {
@@ -697,6 +755,46 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             )?;
             let figures = out_root.join("figures").join(format!("{report}table1"));
             table1_figures(&figures, &result)?;
+            write("unified.safetensors".into(), result.unified.clone(), &mut outputs)?;
+            write(
+                "training_aus.csv".into(),
+                result.training_aus.clone().into_bytes(),
+                &mut outputs,
+            )?;
+        }
+        if let Some(t2) = &result.table2 {
+            write(
+                format!("{prefix}table2.csv"),
+                table2_stage::csv(&t2.rows).into_bytes(),
+                &mut outputs,
+            )?;
+            write(
+                format!("{prefix}reference.csv"),
+                table2::reference_csv(&t2.reference).into_bytes(),
+                &mut outputs,
+            )?;
+            write(
+                format!("{prefix}table2_frames.csv"),
+                table2_stage::frames_csv(&t2.reference, &t2.first).into_bytes(),
+                &mut outputs,
+            )?;
+            if cells.len() == 1 {
+                let report = &cell.spec.report_prefix;
+                let tables = out_root.join("paper-tables");
+                write_atomic(
+                    &tables.join(format!("{report}table2.md")),
+                    table2_stage::markdown(&t2.rows, &cell.spec, &t2.reference).as_bytes(),
+                )?;
+                write_atomic(
+                    &tables.join(format!("{report}table2.tex")),
+                    table2_stage::tex(&t2.rows).as_bytes(),
+                )?;
+                let figures = out_root.join("figures").join(format!("{report}table2"));
+                for (name, bytes) in &t2.renders {
+                    write_atomic(&figures.join(name), bytes)?;
+                }
+                table2_stage::bars(&figures.join("au_mse_bars.png"), &t2.rows)?;
+            }
         }
         sweep_rows.push((cell.name.clone(), result.rows));
     }

@@ -91,6 +91,23 @@ impl Normalizer {
         Normalizer { offset, scale }
     }
 
+    /// The map that normalizes with `self` and de-normalizes with `target`: data normalized
+    /// like `self`'s source land where `target`'s source lies (per input, affine).
+    pub fn onto(&self, target: &Normalizer) -> Normalizer {
+        let (offset, scale) = self
+            .offset
+            .iter()
+            .zip(&self.scale)
+            .zip(target.offset.iter().zip(&target.scale))
+            .map(|((&o, &s), (&to, &ts))| {
+                // ((x - o) s) / ts + to = (x - (o - to ts / s)) (s / ts)
+                let (o, s, to, ts) = (o as f64, s as f64, to as f64, ts as f64);
+                ((o - to * ts / s) as f32, (s / ts) as f32)
+            })
+            .unzip();
+        Normalizer { offset, scale }
+    }
+
     pub fn apply(&self, x: &[f32]) -> Vec<f32> {
         let d = self.offset.len();
         x.iter()

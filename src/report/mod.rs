@@ -1,6 +1,7 @@
 //! Output: renders of the face (and, later, tables and figures). Never touches specs or the
 //! cache.
 
+pub mod compose;
 pub mod figures;
 pub mod render;
 

@@ -7,10 +7,14 @@ use std::path::Path;
 
 use super::raw::{set_path, Node, Origin, Value};
 use super::SpecError;
+use crate::cohort::{ClipParams, CohortKind, CohortParams, SubjectParams};
 use crate::experiments::dataset::{DatasetParams, SolveStart};
 use crate::learn::params::{ModelParams, Normalization, TrainParams};
 use crate::observe::ObserverNoise;
 use crate::sim::controls::edit_distance;
+
+/// The tables a spec can ask for.
+pub const TABLES: [&str; 2] = ["table1", "table2"];
 
 /// Everything a run needs, validated.
 #[derive(Clone, Debug, PartialEq)]
@@ -19,12 +23,18 @@ pub struct Spec {
     pub experiment: String,
     /// Master seeds; each runs the whole pipeline. Default [1].
     pub seeds: Vec<u64>,
-    /// Which tables to make: "table1". Default ["table1"].
+    /// Which tables to make: "table1", "table2". Default ["table1"]. Table 2 needs the
+    /// unified network of Table 1's training stage, so it always trains it.
     pub tables: Vec<String>,
     pub dataset: DatasetParams,
     pub observer: ObserverNoise,
     pub model: ModelParams,
     pub train: TrainParams,
+    /// The reference cohorts (`[cohort]`), used when `tables` has "table2".
+    pub cohort: CohortParams,
+    /// How Table 2's normalized rows map reference AUs into the training range
+    /// (`table2.normalization`: "minmax" or "zscore"; default "minmax").
+    pub table2_normalization: Normalization,
     /// Prefix of the paper-table and figure names (`report.prefix`), so a smoke or test run
     /// does not overwrite the committed `paper-tables/table1.md`. Default "".
     pub report_prefix: String,
@@ -214,6 +224,81 @@ impl<'a> Reader<'a> {
     }
 }
 
+fn read_cohort(r: &mut Reader) -> Result<CohortParams, SpecError> {
+    let d = CohortParams::default();
+    let nonneg = |v: f64| (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"));
+    let unit = |v: f64| (!(0.0..=1.0).contains(&v)).then(|| format!("= {v} must lie in [0, 1]"));
+    let s = d.subjects;
+    let subjects = SubjectParams {
+        face_width_sd: r.float("cohort.subjects.face_width_sd", s.face_width_sd, &nonneg)?,
+        brow_height_sd: r.float("cohort.subjects.brow_height_sd", s.brow_height_sd, &nonneg)?,
+        nose_sd: r.float("cohort.subjects.nose_sd", s.nose_sd, &nonneg)?,
+        jaw_length_sd: r.float("cohort.subjects.jaw_length_sd", s.jaw_length_sd, &nonneg)?,
+        lip_thickness_sd: r.float("cohort.subjects.lip_thickness_sd", s.lip_thickness_sd, &nonneg)?,
+        strength_sd: r.float("cohort.subjects.strength_sd", s.strength_sd, &nonneg)?,
+        muscle_strength_sd: r.float(
+            "cohort.subjects.muscle_strength_sd",
+            s.muscle_strength_sd,
+            &nonneg,
+        )?,
+        stiffness_sd: r.float("cohort.subjects.stiffness_sd", s.stiffness_sd, &nonneg)?,
+        weight_sd: r.float("cohort.subjects.weight_sd", s.weight_sd, &nonneg)?,
+        extra_muscle_probability: r.float(
+            "cohort.subjects.extra_muscle_probability",
+            s.extra_muscle_probability,
+            &unit,
+        )?,
+        extra_muscle_weight: r.float(
+            "cohort.subjects.extra_muscle_weight",
+            s.extra_muscle_weight,
+            &unit,
+        )?,
+    };
+    let mut clip = |kind: CohortKind| -> Result<ClipParams, SpecError> {
+        let c = *d.clip(kind);
+        let k = |field: &str| format!("cohort.{}.{field}", kind.name());
+        let frames_max = if kind.is_video() { 100_000 } else { 1 };
+        let p = ClipParams {
+            subjects: r.integer(&k("subjects"), c.subjects as i64, 1, 10_000)? as usize,
+            frames: r.integer(&k("frames"), c.frames as i64, 1, frames_max)? as usize,
+            peak_min: r.float(&k("peak_min"), c.peak_min, &unit)?,
+            peak_max: r.float(&k("peak_max"), c.peak_max, &unit)?,
+            head_rotation_sd: r.float(&k("head_rotation_sd"), c.head_rotation_sd, &|v| {
+                (!(0.0..=20.0).contains(&v)).then(|| format!("= {v} must lie in [0, 20] degrees"))
+            })?,
+            fps: r.float(&k("fps"), c.fps, &|v| {
+                (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
+            })?,
+            syllable_rate: r.float(&k("syllable_rate"), c.syllable_rate, &nonneg)?,
+            jaw_amplitude: r.float(&k("jaw_amplitude"), c.jaw_amplitude, &unit)?,
+            ramp_frames: r.integer(&k("ramp_frames"), c.ramp_frames as i64, 1, 100_000)? as usize,
+        };
+        if p.peak_min > p.peak_max {
+            let key = k("peak_min");
+            let node = r.get(&key).or_else(|| r.get(&k("peak_max")));
+            if let Some(node) = node {
+                return Err(r.invalid(
+                    node,
+                    &key,
+                    format!("= {} exceeds peak_max = {}", p.peak_min, p.peak_max),
+                ));
+            }
+        }
+        Ok(p)
+    };
+    let images = clip(CohortKind::Images)?;
+    let onset_videos = clip(CohortKind::OnsetVideos)?;
+    let talking_videos = clip(CohortKind::TalkingVideos)?;
+    Ok(CohortParams {
+        seed: r.integer("cohort.seed", d.seed as i64, 0, i64::MAX)? as u64,
+        noise_sd: r.float("cohort.noise_sd", d.noise_sd, &nonneg)?,
+        subjects,
+        images,
+        onset_videos,
+        talking_videos,
+    })
+}
+
 /// Reads one cell's tree.
 pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecError> {
     let mut r = Reader {
@@ -261,8 +346,14 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
     let mut tables = Vec::new();
     for node in r.list("tables", vec![toml::Value::String("table1".into())])? {
         match &node.value {
-            Value::String(s) if s == "table1" => tables.push(s.clone()),
-            _ => return Err(r.invalid(node, "tables", "may list only \"table1\"".into())),
+            Value::String(s) if TABLES.contains(&s.as_str()) => tables.push(s.clone()),
+            _ => {
+                return Err(r.invalid(
+                    node,
+                    "tables",
+                    format!("may list only {}", TABLES.map(|t| format!("\"{t}\"")).join(", ")),
+                ))
+            }
         }
     }
     if tables.is_empty() {
@@ -312,6 +403,10 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         )?)
         .expect("choice checked"),
     };
+    let cohort = read_cohort(&mut r)?;
+    let table2_normalization =
+        Normalization::parse(&r.choice("table2.normalization", "minmax", &["minmax", "zscore"])?)
+            .expect("choice checked");
     let report_prefix = match r.get("report.prefix") {
         None => String::new(),
         Some(node) => match &node.value {
@@ -344,6 +439,8 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         observer,
         model,
         train,
+        cohort,
+        table2_normalization,
         values,
     })
 }

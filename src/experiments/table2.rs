@@ -1,0 +1,583 @@
+//! Table 2 (DESIGN 3, paper 5.4): expression transfer from reference cohorts to the base model.
+//!
+//! Reference AUs R come from our observer on each synthetic subject's face (its own neutral).
+//! They go into the unified network either raw ("unnormalized") or mapped per AU, across all
+//! images or frames of the cohort, onto the training data's per-AU range ("normalized"). The
+//! predicted activations (clamped to [0, 1]; jaw slide and twist neutral, as the paper
+//! activates only the jaw rotation) drive the base model; the observer gives transferred AUs T.
+//! MSE per AU over all frames of ((R - T) / 5)^2.
+
+use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
+
+use crate::cohort::{clips, Clip, CohortKind, CohortParams, Subject};
+use crate::learn::{Mlp, Normalization, Normalizer, Pairs};
+use crate::observe::HeadPose;
+use crate::observe::au::AU_MAX;
+use crate::observe::{landmarks, Calibration, Observer, ObserverNoise, AU_COUNT, AU_NAMES};
+use crate::rng::stream;
+use crate::sim::basis::LinearBasis;
+use crate::sim::controls::{control_names, CONTROL_COUNT, JAW_SLIDE, JAW_TWIST};
+use crate::sim::expression::{Expression, ExpressionWeights};
+use crate::sim::solver::solve_predicted;
+use crate::sim::{
+    solve, solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, State,
+    Workspace,
+};
+
+use super::observe::model_observer;
+
+/// The paper's 8 AUs of Table 2 (indices into `AU_NAMES`).
+pub const PAPER_AUS: [&str; 8] = ["AU01", "AU04", "AU06", "AU09", "AU12", "AU15", "AU20", "AU25"];
+
+/// Zeng et al. Table 2: (row, the 8 AUs' MSE, mean over 17).
+pub const PAPER: [(&str, [f64; 8], f64); 4] = [
+    (
+        "KDEF (unnormalized)",
+        [0.191, 0.088, 0.186, 0.133, 0.011, 0.155, 0.129, 0.092],
+        0.157,
+    ),
+    (
+        "KDEF (normalized)",
+        [0.118, 0.064, 0.186, 0.068, 0.028, 0.109, 0.146, 0.052],
+        0.129,
+    ),
+    (
+        "RAVDESS (video)",
+        [0.012, 0.222, 0.107, 0.044, 0.083, 0.016, 0.077, 0.036],
+        0.086,
+    ),
+    (
+        "CK (video)",
+        [0.038, 0.054, 0.059, 0.015, 0.008, 0.023, 0.057, 0.034],
+        0.048,
+    ),
+];
+
+/// Whether reference AUs are mapped onto the training range before the network.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Setting {
+    Unnormalized,
+    Normalized,
+}
+
+impl Setting {
+    pub const ALL: [Setting; 2] = [Setting::Unnormalized, Setting::Normalized];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Setting::Unnormalized => "unnormalized",
+            Setting::Normalized => "normalized",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Setting> {
+        Setting::ALL.into_iter().find(|k| k.name() == s)
+    }
+}
+
+/// One reference image or video frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RefFrame {
+    pub cohort: CohortKind,
+    pub subject: usize,
+    /// `None`: a neutral image.
+    pub expression: Option<Expression>,
+    pub frame: usize,
+    /// Observed head pose (OpenFace pose_Rx, Ry, Rz; rad).
+    pub pose: [f64; 3],
+    pub aus: [f64; AU_COUNT],
+    /// The subject's activations (its own muscles).
+    pub activations: [f64; CONTROL_COUNT],
+}
+
+fn expression_name(e: Option<Expression>) -> &'static str {
+    e.map_or("neutral", |e| e.name())
+}
+
+/// The subjects of one cohort.
+pub fn subjects(
+    base: &Mesh,
+    face: FaceParams,
+    weights: &ExpressionWeights,
+    p: &CohortParams,
+    kind: CohortKind,
+) -> Result<Vec<Subject>> {
+    (0..p.clip(kind).subjects)
+        .into_par_iter()
+        .map(|i| {
+            Subject::draw(base, face, weights, &p.subjects, p.seed, kind.name(), i)
+                .with_context(|| format!("cohort {}: subject {i}", kind.name()))
+        })
+        .collect()
+}
+
+/// Solves a clip frame by frame (the first from rest, each next from the previous frame's
+/// equilibrium), calling `each` with every frame's state.
+fn solve_clip(
+    model: &FaceModel,
+    frames: &[Activations],
+    first: impl Fn(&Activations, &mut Workspace) -> Result<State>,
+    ws: &mut Workspace,
+    params: &SolveParams,
+    mut each: impl FnMut(usize, &State) -> Result<()>,
+) -> Result<()> {
+    let mut state: Option<State> = None;
+    for (f, a) in frames.iter().enumerate() {
+        match state.as_mut() {
+            None => state = Some(first(a, ws).with_context(|| format!("frame {f}"))?),
+            Some(s) => {
+                solve(model, a, s, ws, params).with_context(|| format!("frame {f}"))?;
+            }
+        }
+        each(f, state.as_ref().expect("solved"))?;
+    }
+    Ok(())
+}
+
+/// A subject's clip, solved and observed: the reference frames.
+pub fn observe_clip(
+    subject: &Subject,
+    observer: &Observer,
+    kind: CohortKind,
+    clip: &Clip,
+    noise_sd: f64,
+    seed: u64,
+    params: &SolveParams,
+    ws: &mut Workspace,
+    mut keep: impl FnMut(&State),
+) -> Result<Vec<RefFrame>> {
+    let model = &subject.model;
+    let activations: Vec<Activations> =
+        clip.frames.iter().map(|f| f.activations.clone()).collect();
+    let noise = ObserverNoise {
+        noise_sd,
+        gain_spread: 0.0,
+    };
+    let mut out = Vec::with_capacity(clip.frames.len());
+    let name = expression_name(clip.expression);
+    solve_clip(
+        model,
+        &activations,
+        |a, ws| Ok(solve_from_rest(model, a, ws, params)?.0),
+        ws,
+        params,
+        |f, state| {
+            let head = clip.frames[f].head;
+            let r = HeadPose {
+                pitch: head[0],
+                yaw: head[1],
+                roll: head[2],
+            }
+            .rotation();
+            let turned = landmarks(state.surface(model.vertex_count())).map(|p| r.apply(p));
+            let o = observer.observe(&turned)?;
+            let mut aus = o.aus;
+            if noise_sd > 0.0 {
+                let label = format!("cohort/{}/noise/{}/{name}/{f}", kind.name(), clip.subject);
+                noise.apply(&mut aus, &[1.0; AU_COUNT], &mut stream(seed, &label));
+            }
+            keep(state);
+            out.push(RefFrame {
+                cohort: kind,
+                subject: clip.subject,
+                expression: clip.expression,
+                frame: f,
+                pose: [o.pose.pitch, o.pose.yaw, o.pose.roll],
+                aus,
+                activations: *state.activations.values(),
+            });
+            Ok(())
+        },
+    )
+    .with_context(|| format!("cohort {}, subject {}, {name}", kind.name(), clip.subject))?;
+    Ok(out)
+}
+
+/// Every cohort's reference frames, in cohort, subject, clip and frame order.
+#[allow(clippy::too_many_arguments)]
+pub fn reference(
+    base: &Mesh,
+    face: FaceParams,
+    weights: &ExpressionWeights,
+    calibration: &Calibration,
+    p: &CohortParams,
+    kinds: &[CohortKind],
+    params: &SolveParams,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Vec<RefFrame>> {
+    let jobs: Vec<(CohortKind, usize)> = kinds
+        .iter()
+        .flat_map(|&k| (0..p.clip(k).subjects).map(move |i| (k, i)))
+        .collect();
+    let per_job: Vec<Vec<RefFrame>> = jobs
+        .par_iter()
+        .map(|&(kind, i)| -> Result<Vec<RefFrame>> {
+            let subject = Subject::draw(base, face, weights, &p.subjects, p.seed, kind.name(), i)
+                .with_context(|| format!("cohort {}: subject {i}", kind.name()))?;
+            let observer = model_observer(&subject.model, calibration.clone())?;
+            let mut ws = Workspace::new(&subject.model);
+            let mut frames = Vec::new();
+            for clip in clips(&subject, kind, p.clip(kind), p.seed) {
+                frames.extend(observe_clip(
+                    &subject,
+                    &observer,
+                    kind,
+                    &clip,
+                    p.noise_sd,
+                    p.seed,
+                    params,
+                    &mut ws,
+                    |_| {},
+                )?);
+                tick();
+            }
+            Ok(frames)
+        })
+        .collect::<Result<_>>()?;
+    Ok(per_job.into_iter().flatten().collect())
+}
+
+/// Number of clips `reference` solves (for a progress bar).
+pub fn clip_count(p: &CohortParams, kinds: &[CohortKind]) -> usize {
+    kinds
+        .iter()
+        .map(|&k| p.clip(k).subjects * if k.is_video() { 6 } else { 7 })
+        .sum()
+}
+
+/// Splits frames into clips: runs of the same cohort, subject and expression.
+pub fn clip_ranges(frames: &[RefFrame]) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::new();
+    let mut start = 0;
+    for i in 1..=frames.len() {
+        let cut = i == frames.len() || {
+            let (a, b) = (&frames[i - 1], &frames[i]);
+            (a.cohort, a.subject, a.expression) != (b.cohort, b.subject, b.expression)
+        };
+        if cut {
+            out.push(start..i);
+            start = i;
+        }
+    }
+    out
+}
+
+fn pairs_of(rows: &[[f64; AU_COUNT]]) -> Pairs {
+    Pairs {
+        inputs: AU_COUNT,
+        outputs: 0,
+        x: rows.iter().flatten().map(|&v| v as f32).collect(),
+        y: Vec::new(),
+    }
+}
+
+/// The per-AU affine map that takes `input`'s range (min-max) or mean and SD (z-score) onto
+/// `target`'s: `x -> (x - offset) * scale`. The identity when the two agree.
+pub fn range_map(kind: Normalization, input: &[[f64; AU_COUNT]], target: &Normalizer) -> Normalizer {
+    let fitted = Normalizer::fit(kind, &pairs_of(input));
+    fitted.onto(target)
+}
+
+/// The training data's per-AU statistics as a normalizer of `kind`.
+pub fn training_range(kind: Normalization, training_aus: &[[f64; AU_COUNT]]) -> Normalizer {
+    Normalizer::fit(kind, &pairs_of(training_aus))
+}
+
+/// Network outputs as activations the base model accepts: each clamped to [0, 1], jaw slide
+/// and twist neutral.
+pub fn to_activations(out: &[f32]) -> Activations {
+    let mut values: [f64; CONTROL_COUNT] =
+        std::array::from_fn(|k| (out[k] as f64).clamp(0.0, 1.0));
+    values[JAW_SLIDE] = 0.5;
+    values[JAW_TWIST] = 0.5;
+    Activations::from_values(&values).expect("clamped")
+}
+
+/// One transferred frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Transferred {
+    pub activations: [f64; CONTROL_COUNT],
+    pub aus: [f64; AU_COUNT],
+}
+
+/// Transfers clips of input AUs (each a sequence of frames) onto the base model: the network
+/// (after `map`, if any), then a solve per frame (the first from the basis prediction or rest,
+/// each next warm from the previous one), then the observer. Clips run in parallel; frames in
+/// order. Calls `tick` per clip.
+#[allow(clippy::too_many_arguments)]
+pub fn transfer(
+    model: &FaceModel,
+    basis: Option<&LinearBasis>,
+    observer: &Observer,
+    mlp: &Mlp,
+    map: Option<&Normalizer>,
+    clips: &[Vec<[f64; AU_COUNT]>],
+    params: &SolveParams,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Vec<Vec<Transferred>>> {
+    let inputs: Vec<f32> = clips.iter().flatten().flatten().map(|&v| v as f32).collect();
+    let inputs = match map {
+        Some(m) => m.apply(&inputs),
+        None => inputs,
+    };
+    if inputs.iter().any(|v| !v.is_finite()) {
+        bail!("reference AUs contain NaN or infinite values");
+    }
+    let out = mlp.predict(&inputs).context("running the unified network")?;
+    let mut start = 0;
+    let mut jobs = Vec::with_capacity(clips.len());
+    for c in clips {
+        let acts: Vec<Activations> = (start..start + c.len())
+            .map(|i| to_activations(&out[i * CONTROL_COUNT..(i + 1) * CONTROL_COUNT]))
+            .collect();
+        start += c.len();
+        jobs.push(acts);
+    }
+    jobs.par_iter()
+        .enumerate()
+        .map_init(
+            || Workspace::new(model),
+            |ws, (ci, acts)| -> Result<Vec<Transferred>> {
+                let mut frames = Vec::with_capacity(acts.len());
+                solve_clip(
+                    model,
+                    acts,
+                    |a, ws| {
+                        Ok(match basis {
+                            Some(b) => solve_predicted(model, b, a, ws, params)?.0,
+                            None => solve_from_rest(model, a, ws, params)?.0,
+                        })
+                    },
+                    ws,
+                    params,
+                    |_, state| {
+                        let o = observer.observe(&landmarks(state.surface(model.vertex_count())))?;
+                        frames.push(Transferred {
+                            activations: *state.activations.values(),
+                            aus: o.aus,
+                        });
+                        Ok(())
+                    },
+                )
+                .with_context(|| format!("transferring clip {ci}"))?;
+                tick();
+                Ok(frames)
+            },
+        )
+        .collect()
+}
+
+/// Per-AU MSE of (reference - transferred) / 5 over all frames.
+pub fn au_mse(reference: &[[f64; AU_COUNT]], transferred: &[[f64; AU_COUNT]]) -> [f64; AU_COUNT] {
+    let n = reference.len().max(1) as f64;
+    std::array::from_fn(|k| {
+        reference
+            .iter()
+            .zip(transferred)
+            .map(|(r, t)| ((r[k] - t[k]) / AU_MAX).powi(2))
+            .sum::<f64>()
+            / n
+    })
+}
+
+/// One Table 2 row: a cohort in a setting, for one seed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    pub seed: u64,
+    pub cohort: CohortKind,
+    pub setting: Setting,
+    pub mse: [f64; AU_COUNT],
+}
+
+impl Row {
+    pub fn mean(&self) -> f64 {
+        self.mse.iter().sum::<f64>() / AU_COUNT as f64
+    }
+}
+
+/// `cohort,subject,expression,frame,pose_Rx,pose_Ry,pose_Rz,AU01..AU45,<56 controls>`;
+/// numbers in Rust's shortest round-trip form.
+pub fn reference_csv(frames: &[RefFrame]) -> String {
+    let mut out = String::from("cohort,subject,expression,frame,pose_Rx,pose_Ry,pose_Rz");
+    for a in AU_NAMES {
+        out.push_str(&format!(",{a}"));
+    }
+    for c in control_names() {
+        out.push_str(&format!(",{c}"));
+    }
+    out.push('\n');
+    for f in frames {
+        out.push_str(&format!(
+            "{},{},{},{}",
+            f.cohort.name(),
+            f.subject,
+            expression_name(f.expression),
+            f.frame
+        ));
+        for v in f.pose.iter().chain(&f.aus).chain(&f.activations) {
+            out.push_str(&format!(",{v}"));
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// Cells of one CSV line, with numbers parsed on demand and errors naming file and line.
+struct Line<'a> {
+    name: &'a str,
+    line: usize,
+    cells: Vec<&'a str>,
+}
+
+impl Line<'_> {
+    fn num(&self, k: usize) -> Result<f64> {
+        self.cells[k].parse().with_context(|| {
+            format!("{}:{}: `{}` is not a number", self.name, self.line, self.cells[k])
+        })
+    }
+
+    fn array<const N: usize>(&self, from: usize) -> Result<[f64; N]> {
+        let v: Vec<f64> = (from..from + N).map(|k| self.num(k)).collect::<Result<_>>()?;
+        Ok(v.try_into().expect("N values"))
+    }
+}
+
+fn lines<'a>(text: &'a str, name: &'a str, expected: usize) -> Result<Vec<Line<'a>>> {
+    let mut it = text.lines();
+    let header = it.next().unwrap_or_default();
+    if header.split(',').count() != expected {
+        bail!(
+            "{name}: header has {} columns, expected {expected}",
+            header.split(',').count()
+        );
+    }
+    it.enumerate()
+        .map(|(i, l)| {
+            let cells: Vec<&str> = l.split(',').collect();
+            if cells.len() != expected {
+                bail!("{name}:{}: {} cells, expected {expected}", i + 2, cells.len());
+            }
+            Ok(Line {
+                name,
+                line: i + 2,
+                cells,
+            })
+        })
+        .collect()
+}
+
+fn parse_expression(l: &Line, k: usize) -> Result<Option<Expression>> {
+    match l.cells[k] {
+        "neutral" => Ok(None),
+        s => Ok(Some(s.parse().map_err(|e| {
+            anyhow::anyhow!("{}:{}: {e}", l.name, l.line)
+        })?)),
+    }
+}
+
+pub fn reference_from_csv(text: &str, name: &str) -> Result<Vec<RefFrame>> {
+    lines(text, name, 7 + AU_COUNT + CONTROL_COUNT)?
+        .into_iter()
+        .map(|l| {
+            Ok(RefFrame {
+                cohort: CohortKind::parse(l.cells[0]).with_context(|| {
+                    format!("{name}:{}: unknown cohort `{}`", l.line, l.cells[0])
+                })?,
+                subject: l.num(1)? as usize,
+                expression: parse_expression(&l, 2)?,
+                frame: l.num(3)? as usize,
+                pose: l.array(4)?,
+                aus: l.array(7)?,
+                activations: l.array(7 + AU_COUNT)?,
+            })
+        })
+        .collect()
+}
+
+/// One seed's transfers: `setting,<frame index into the reference>,AU01..AU45,<56 controls>`.
+pub fn transfers_csv(t: &[(Setting, Vec<Transferred>)]) -> String {
+    let mut out = String::from("setting,index");
+    for a in AU_NAMES {
+        out.push_str(&format!(",{a}"));
+    }
+    for c in control_names() {
+        out.push_str(&format!(",{c}"));
+    }
+    out.push('\n');
+    for (setting, frames) in t {
+        for (i, f) in frames.iter().enumerate() {
+            out.push_str(&format!("{},{i}", setting.name()));
+            for v in f.aus.iter().chain(&f.activations) {
+                out.push_str(&format!(",{v}"));
+            }
+            out.push('\n');
+        }
+    }
+    out
+}
+
+pub fn transfers_from_csv(text: &str, name: &str) -> Result<Vec<(Setting, Vec<Transferred>)>> {
+    let mut out: Vec<(Setting, Vec<Transferred>)> = Vec::new();
+    for l in lines(text, name, 2 + AU_COUNT + CONTROL_COUNT)? {
+        let setting = Setting::parse(l.cells[0])
+            .with_context(|| format!("{name}:{}: unknown setting `{}`", l.line, l.cells[0]))?;
+        let frame = Transferred {
+            aus: l.array(2)?,
+            activations: l.array(2 + AU_COUNT)?,
+        };
+        match out.last_mut() {
+            Some((s, v)) if *s == setting => v.push(frame),
+            _ => out.push((setting, vec![frame])),
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn range_map_is_the_identity_when_ranges_match() {
+        let a: Vec<[f64; AU_COUNT]> = (0..5)
+            .map(|i| std::array::from_fn(|k| (i * (k + 1)) as f64 * 0.1))
+            .collect();
+        // Same ranges, different samples inside them.
+        let mut b = a.clone();
+        b.swap(1, 3);
+        b[2] = std::array::from_fn(|k| a[2][k] * 0.5 + a[3][k] * 0.5);
+        for kind in [Normalization::MinMax] {
+            let m = range_map(kind, &b, &training_range(kind, &a));
+            for (o, s) in m.offset.iter().zip(&m.scale) {
+                assert!(o.abs() < 1e-6, "offset {o}");
+                assert!((s - 1.0).abs() < 1e-6, "scale {s}");
+            }
+        }
+        let z = range_map(Normalization::ZScore, &a, &training_range(Normalization::ZScore, &a));
+        let x: Vec<f32> = a.iter().flatten().map(|&v| v as f32).collect();
+        for (u, v) in z.apply(&x).iter().zip(&x) {
+            assert!((u - v).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn range_map_takes_one_range_onto_another() {
+        let input: Vec<[f64; AU_COUNT]> = vec![[1.0; AU_COUNT], [2.0; AU_COUNT]];
+        let target: Vec<[f64; AU_COUNT]> = vec![[0.0; AU_COUNT], [4.0; AU_COUNT]];
+        let m = range_map(
+            Normalization::MinMax,
+            &input,
+            &training_range(Normalization::MinMax, &target),
+        );
+        let y = m.apply(&[1.5; AU_COUNT]);
+        assert!(y.iter().all(|v| (v - 2.0).abs() < 1e-6), "{y:?}");
+    }
+
+    #[test]
+    fn mse_is_on_the_unit_scale() {
+        let r = vec![[5.0; AU_COUNT], [0.0; AU_COUNT]];
+        let t = vec![[0.0; AU_COUNT], [0.0; AU_COUNT]];
+        assert!(au_mse(&r, &t).iter().all(|&m| m == 0.5));
+    }
+}

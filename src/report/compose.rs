@@ -1,0 +1,91 @@
+//! Composite images: labelled grids of renders (the paper's Fig. 5), side-by-side frames, and
+//! animated GIFs, as bytes so the harness can cache and write them atomically.
+
+use anyhow::Result;
+use image::{Rgb, RgbImage};
+use plotters::prelude::*;
+
+/// PNG bytes of an image.
+pub fn png_bytes(image: &RgbImage) -> Result<Vec<u8>> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    image.write_to(&mut out, image::ImageFormat::Png)?;
+    Ok(out.into_inner())
+}
+
+/// An animated GIF (looping) of equally sized frames, `delay_ms` each.
+pub fn gif_bytes(frames: &[RgbImage], delay_ms: u32) -> Result<Vec<u8>> {
+    use image::codecs::gif::{GifEncoder, Repeat};
+    use image::{Delay, DynamicImage, Frame};
+    let mut out = Vec::new();
+    {
+        let mut encoder = GifEncoder::new_with_speed(&mut out, 10);
+        encoder.set_repeat(Repeat::Infinite)?;
+        for f in frames {
+            let rgba = DynamicImage::ImageRgb8(f.clone()).to_rgba8();
+            encoder.encode_frame(Frame::from_parts(
+                rgba,
+                0,
+                0,
+                Delay::from_numer_denom_ms(delay_ms, 1),
+            ))?;
+        }
+    }
+    Ok(out)
+}
+
+/// Images side by side (all the same height).
+pub fn side_by_side(images: &[RgbImage]) -> RgbImage {
+    let h = images.iter().map(|i| i.height()).max().unwrap_or(0);
+    let w = images.iter().map(|i| i.width()).sum();
+    let mut out = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
+    let mut x = 0;
+    for i in images {
+        image::imageops::replace(&mut out, i, x as i64, 0);
+        x += i.width();
+    }
+    out
+}
+
+/// A grid of equally sized cells with a title, column labels on top and row labels on the
+/// left, text in the embedded font.
+pub fn labelled_grid(
+    title: &str,
+    cells: &[Vec<RgbImage>],
+    row_labels: &[String],
+    column_labels: &[String],
+) -> Result<RgbImage> {
+    super::figures::register_font();
+    let (cw, ch) = cells
+        .first()
+        .and_then(|r| r.first())
+        .map(|c| (c.width(), c.height()))
+        .unwrap_or((1, 1));
+    let columns = cells.iter().map(Vec::len).max().unwrap_or(0) as u32;
+    let (left, top) = (190u32, 70u32);
+    let (w, h) = (left + columns * cw, top + cells.len() as u32 * ch);
+    let mut canvas = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
+    for (r, row) in cells.iter().enumerate() {
+        for (c, cell) in row.iter().enumerate() {
+            let (x, y) = (left + c as u32 * cw, top + r as u32 * ch);
+            image::imageops::replace(&mut canvas, cell, x as i64, y as i64);
+        }
+    }
+    {
+        let root = BitMapBackend::with_buffer(canvas.as_mut(), (w, h)).into_drawing_area();
+        let title_style = ("sans-serif", 26).into_font().color(&BLACK);
+        root.draw_text(title, &title_style, (12, 8))?;
+        let label = ("sans-serif", 20).into_font().color(&BLACK);
+        for (c, text) in column_labels.iter().enumerate() {
+            let x = (left + c as u32 * cw + cw / 2) as i32 - 5 * text.len() as i32;
+            root.draw_text(text, &label, (x, top as i32 - 28))?;
+        }
+        for (r, text) in row_labels.iter().enumerate() {
+            let y = (top + r as u32 * ch + ch / 2) as i32;
+            for (i, line) in text.lines().enumerate() {
+                root.draw_text(line, &label, (10, y - 12 + 24 * i as i32))?;
+            }
+        }
+        root.present()?;
+    }
+    Ok(canvas)
+}
