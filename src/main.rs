@@ -7,12 +7,15 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use anyhow::Context;
-use facelab::experiments::bench::{bench_observe, bench_solve, bench_train};
+use facelab::experiments::bench::{bench_observe, bench_solve, bench_train, bench_transfer};
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
 use facelab::experiments::observe;
 use facelab::experiments::run;
+use facelab::experiments::transfer;
 use facelab::io::atomic::write_atomic;
 use facelab::io::calibration::default_calibration_path;
+use facelab::learn::Normalization;
+use facelab::observe::AU_NAMES;
 use facelab::report::render::{Camera, RenderOptions};
 use facelab::sim::SolveParams;
 
@@ -172,6 +175,24 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
+    /// Transfer the expressions of an OpenFace CSV (its AUxx_r columns) onto the model
+    /// through a run's unified network.
+    Transfer {
+        /// OpenFace 2.x CSV (FeatureExtraction or FaceLandmarkImg output)
+        #[arg(long)]
+        openface: PathBuf,
+        /// Run folder with unified.safetensors, training_aus.csv and spec.toml
+        #[arg(long, default_value = "results/paper/latest")]
+        model: PathBuf,
+        /// Map each AU across the file onto the training data's range before the network
+        #[arg(long, value_parser = ["none", "minmax", "zscore"], default_value = "minmax")]
+        normalize: String,
+        /// Frames to render as PNG [default: first, middle and last]
+        #[arg(long, value_delimiter = ',')]
+        frames: Vec<i64>,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Benchmarks (run with --release).
     Bench {
         #[command(subcommand)]
@@ -209,6 +230,14 @@ enum Bench {
         /// Threads for candle [default: 1, as the comparison with PyTorch uses]
         #[arg(long, default_value_t = 1)]
         threads: usize,
+    },
+    /// Transfer speed per frame (network, solve, observe) on one core, from a run with Table 2.
+    Transfer {
+        #[arg(long, default_value = "results/paper/latest")]
+        model: PathBuf,
+        /// Clips of each cohort to time
+        #[arg(long, default_value_t = 4)]
+        clips: usize,
     },
     /// Observer speed: one face (landmarks + AUs), and reading a large OpenFace file.
     Observe {
@@ -342,6 +371,33 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 );
             }
         }
+        Command::Transfer {
+            openface,
+            model,
+            normalize,
+            frames,
+            out,
+        } => {
+            let summary = transfer::transfer_openface(&transfer::TransferOptions {
+                openface,
+                model,
+                normalize: Normalization::parse(&normalize).expect("clap checked"),
+                out,
+                render_frames: frames,
+            })?;
+            println!(
+                "{} frames transferred, {} skipped (success = 0); AU MSE mean {:.4}",
+                summary.rows,
+                summary.skipped,
+                summary.mean()
+            );
+            for (a, m) in AU_NAMES.iter().zip(&summary.mse) {
+                println!("{a} {m:.4}");
+            }
+            for p in &summary.written {
+                println!("wrote {}", p.display());
+            }
+        }
         Command::Bench { what } => match what {
             Bench::Train {
                 pairs,
@@ -356,6 +412,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     export.as_deref(),
                     &mut std::io::stdout().lock(),
                 )?
+            }
+            Bench::Transfer { model, clips } => {
+                set_threads(Some(1))?;
+                bench_transfer(&model, clips, &mut std::io::stdout().lock())?
             }
             Bench::Observe { frames } => bench_observe(frames, &mut std::io::stdout().lock())?,
             Bench::Solve {

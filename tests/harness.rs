@@ -129,17 +129,33 @@ fn same_spec_gives_the_same_bytes_across_threads_and_from_the_cache() {
     assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
     let b = run_smoke(&two.join("results"), &["--threads", "2"]);
     assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
-    for file in ["table1.csv", "curves.csv", "spec.toml"] {
+    for file in [
+        "table1.csv",
+        "curves.csv",
+        "spec.toml",
+        "table2.csv",
+        "reference.csv",
+        "table2_frames.csv",
+        "unified.safetensors",
+    ] {
         assert_eq!(
             latest(&one.join("results"), file),
             latest(&two.join("results"), file),
             "{file} differs between 1 and 2 threads"
         );
     }
-    assert_eq!(
-        std::fs::read(one.join("paper-tables/smoke_table1.md")).unwrap(),
-        std::fs::read(two.join("paper-tables/smoke_table1.md")).unwrap()
-    );
+    for file in [
+        "paper-tables/smoke_table1.md",
+        "paper-tables/smoke_table2.md",
+        "figures/smoke_table2/transfer_grid.png",
+        "figures/smoke_table2/talking_videos.gif",
+    ] {
+        assert_eq!(
+            std::fs::read(one.join(file)).unwrap(),
+            std::fs::read(two.join(file)).unwrap(),
+            "{file} differs between 1 and 2 threads"
+        );
+    }
 
     // A second run computes nothing and writes the same bytes.
     let first = latest(&one.join("results"), "table1.csv");

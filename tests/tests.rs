@@ -1,11 +1,12 @@
 //! Integration tests, one binary (see STYLE.md): `sim` physics, the
-//! observer, OpenFace files and the command line.
+//! observer, OpenFace files, the command line and Table 2's transfer.
 
 mod cli;
 mod harness;
 mod observe;
 mod openface;
 mod sim;
+mod transfer;
 
 use std::sync::OnceLock;
 

@@ -35,6 +35,10 @@ pub struct SubjectParams {
     pub jaw_length_sd: f64,
     /// SD of the lip thickness change at the red lips (m). Default 1 mm.
     pub lip_thickness_sd: f64,
+    /// Median of the whole-face muscle strength (1 = the base model). Default 1: we know of
+    /// no measurement that puts real faces above or below the model, so the population is
+    /// centred on it; `ablations/cohort_strength.toml` moves it.
+    pub strength_median: f64,
     /// Log-SD of the whole-face muscle strength. Default 0.3: people's expressions differ in
     /// amplitude by a factor of about 2 between the weaker and the stronger third.
     pub strength_sd: f64,
@@ -58,6 +62,7 @@ impl Default for SubjectParams {
             nose_sd: 2e-3,
             jaw_length_sd: 3e-3,
             lip_thickness_sd: 1e-3,
+            strength_median: 1.0,
             strength_sd: 0.3,
             muscle_strength_sd: 0.15,
             stiffness_sd: 0.2,
@@ -90,8 +95,10 @@ fn anchors(base: &Mesh) -> Anchors {
     let l = landmarks(&base.positions);
     let mean = |idx: std::ops::Range<usize>| {
         let n = idx.len() as f64;
-        idx.fold([0.0; 3], |s, i| [s[0] + l[i][0], s[1] + l[i][1], s[2] + l[i][2]])
-            .map(|c| c / n)
+        idx.fold([0.0; 3], |s, i| {
+            [s[0] + l[i][0], s[1] + l[i][1], s[2] + l[i][2]]
+        })
+        .map(|c| c / n)
     };
     Anchors {
         brow_y: mean(17..27)[1],
@@ -183,7 +190,7 @@ impl Subject {
             jaw_length: p.jaw_length_sd * rng.normal(),
             lip_thickness: p.lip_thickness_sd * rng.normal(),
         };
-        let strength = lognormal(&mut rng, p.strength_sd);
+        let strength = p.strength_median * lognormal(&mut rng, p.strength_sd);
         let mut pair_strength = [0.0; MUSCLE_PAIRS.len()];
         for s in &mut pair_strength {
             *s = strength * lognormal(&mut rng, p.muscle_strength_sd);
@@ -419,7 +426,11 @@ pub fn clips(subject: &Subject, kind: CohortKind, p: &ClipParams, seed: u64) -> 
                     let (s, jaw) = match kind {
                         CohortKind::Images => (peak, None),
                         CohortKind::OnsetVideos => {
-                            let t = if n > 1 { f as f64 / (n - 1) as f64 } else { 1.0 };
+                            let t = if n > 1 {
+                                f as f64 / (n - 1) as f64
+                            } else {
+                                1.0
+                            };
                             (peak * smoothstep(t), None)
                         }
                         CohortKind::TalkingVideos => {
@@ -466,7 +477,11 @@ mod tests {
             jaw_length: 0.003,
             lip_thickness: 0.001,
         };
-        for p in [[0.013, -0.031, 0.01], [0.04, 0.02, -0.01], [0.002, -0.06, 0.0]] {
+        for p in [
+            [0.013, -0.031, 0.01],
+            [0.04, 0.02, -0.01],
+            [0.002, -0.06, 0.0],
+        ] {
             let d = m.displace(&a, p);
             let e = m.displace(&a, [-p[0], p[1], p[2]]);
             assert_eq!(d[0], -e[0]);

@@ -386,3 +386,97 @@ pub fn bench_train(
     out.flush()?;
     Ok(())
 }
+
+/// `facelab bench transfer`: one frame of transfer (network, solve, observe) on one core, for
+/// the talking-video frames (each solved warm from the previous frame) and the images (each
+/// from rest), taking reference AUs and the network from a run folder with Table 2.
+pub fn bench_transfer(run: &std::path::Path, clips: usize, out: &mut impl Write) -> Result<()> {
+    use super::observe::model_observer;
+    use super::table2::{clip_ranges, predict_activations, reference_from_csv, solve_clip};
+    use crate::cohort::CohortKind;
+    use crate::io::calibration::{default_calibration_path, read_calibration};
+    use anyhow::Context;
+
+    let path = run.join("reference.csv");
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!(
+            "{}: cannot read (a run with Table 2 writes it)",
+            path.display()
+        )
+    })?;
+    let reference = reference_from_csv(&text, &path.display().to_string())?;
+    let bytes = std::fs::read(run.join("unified.safetensors"))
+        .with_context(|| format!("{}: no unified.safetensors", run.display()))?;
+    let mlp = crate::learn::Mlp::from_safetensors(&bytes)?;
+    let model = FaceSource::default().model()?;
+    let calibration = read_calibration(&default_calibration_path())?.calibration();
+    let observer = model_observer(&model, calibration)?;
+    let params = SolveParams::default();
+    let mut ws = Workspace::new(&model);
+    for (kind, name) in [
+        (CohortKind::TalkingVideos, "video"),
+        (CohortKind::Images, "image"),
+    ] {
+        let ranges: Vec<_> = clip_ranges(&reference)
+            .into_iter()
+            .filter(|r| reference[r.start].cohort == kind)
+            .take(clips)
+            .collect();
+        let (mut network, mut solving, mut observing, mut frames) = (0.0, 0.0, 0.0, 0usize);
+        for r in ranges {
+            let aus: Vec<_> = reference[r].iter().map(|f| f.aus).collect();
+            let t = Instant::now();
+            let mut acts = Vec::new();
+            for a in &aus {
+                acts.extend(predict_activations(&mlp, None, std::slice::from_ref(a))?);
+            }
+            network += t.elapsed().as_secs_f64();
+            let mut last = Instant::now();
+            solve_clip(
+                &model,
+                &acts,
+                |a, ws| Ok(solve_from_rest(&model, a, ws, &params)?.0),
+                &mut ws,
+                &params,
+                |_, state| {
+                    solving += last.elapsed().as_secs_f64();
+                    let t = Instant::now();
+                    std::hint::black_box(
+                        observer.observe(&landmarks(state.surface(model.vertex_count())))?,
+                    );
+                    observing += t.elapsed().as_secs_f64();
+                    frames += 1;
+                    last = Instant::now();
+                    Ok(())
+                },
+            )?;
+        }
+        let n = frames.max(1) as f64;
+        line(out, &format!("transfer.{name}.frames"), n, "frames")?;
+        line(
+            out,
+            &format!("transfer.{name}.network_us_per_frame"),
+            1e6 * network / n,
+            "us",
+        )?;
+        line(
+            out,
+            &format!("transfer.{name}.solve_ms_per_frame"),
+            1e3 * solving / n,
+            "ms",
+        )?;
+        line(
+            out,
+            &format!("transfer.{name}.observe_us_per_frame"),
+            1e6 * observing / n,
+            "us",
+        )?;
+        line(
+            out,
+            &format!("transfer.{name}.ms_per_frame"),
+            1e3 * (network + solving + observing) / n,
+            "ms",
+        )?;
+    }
+    Ok(())
+}

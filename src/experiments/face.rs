@@ -28,7 +28,10 @@ pub struct FaceSource {
 impl FaceSource {
     pub fn model(&self) -> Result<FaceModel> {
         FaceModel::new(&self.mesh()?, self.params()).with_context(|| {
-            format!("{}: cannot build the face model", self.mesh_path().display())
+            format!(
+                "{}: cannot build the face model",
+                self.mesh_path().display()
+            )
         })
     }
 

@@ -8,3 +8,4 @@ pub mod run;
 pub mod table1;
 pub mod table2;
 pub mod table2_stage;
+pub mod transfer;

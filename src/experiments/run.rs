@@ -25,7 +25,6 @@ use super::observe::model_observer;
 use super::table1::{self, Network, Row};
 use super::table2;
 use super::table2_stage::{self, Table2Result};
-use crate::observe::AU_NAMES;
 use crate::cache::{self, Cache, Entry};
 use crate::io::atomic::write_atomic;
 use crate::io::calibration::{default_calibration_path, read_calibration};
@@ -33,6 +32,7 @@ use crate::io::expressions::default_expressions_path;
 use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
 use crate::io::mesh::default_mesh_path;
 use crate::learn::{self, Curves, Mlp};
+use crate::observe::AU_NAMES;
 use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::geom::V3;
@@ -716,6 +716,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             Ok(())
         };
     let mut sweep_rows: Vec<(String, Vec<Row>)> = Vec::new();
+    let mut sweep_table2: Vec<(String, Vec<table2::Row>)> = Vec::new();
     for cell in &cells {
         let prefix = if cells.len() > 1 {
             format!("{}/", sanitize(&cell.name))
@@ -755,7 +756,11 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             )?;
             let figures = out_root.join("figures").join(format!("{report}table1"));
             table1_figures(&figures, &result)?;
-            write("unified.safetensors".into(), result.unified.clone(), &mut outputs)?;
+            write(
+                "unified.safetensors".into(),
+                result.unified.clone(),
+                &mut outputs,
+            )?;
             write(
                 "training_aus.csv".into(),
                 result.training_aus.clone().into_bytes(),
@@ -796,10 +801,16 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 table2_stage::bars(&figures.join("au_mse_bars.png"), &t2.rows)?;
             }
         }
+        if let Some(t2) = result.table2 {
+            sweep_table2.push((cell.name.clone(), t2.rows));
+        }
         sweep_rows.push((cell.name.clone(), result.rows));
     }
     if cells.len() > 1 {
-        let md = sweep_markdown(&experiment, &sweep_rows);
+        let mut md = sweep_markdown(&experiment, &sweep_rows);
+        if !sweep_table2.is_empty() {
+            md.push_str(&table2_stage::sweep_markdown(&sweep_table2));
+        }
         write(
             format!("{experiment}.csv"),
             sweep_csv(&sweep_rows).into_bytes(),

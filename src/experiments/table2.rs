@@ -12,8 +12,8 @@ use rayon::prelude::*;
 
 use crate::cohort::{clips, Clip, CohortKind, CohortParams, Subject};
 use crate::learn::{Mlp, Normalization, Normalizer, Pairs};
-use crate::observe::HeadPose;
 use crate::observe::au::AU_MAX;
+use crate::observe::HeadPose;
 use crate::observe::{landmarks, Calibration, Observer, ObserverNoise, AU_COUNT, AU_NAMES};
 use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
@@ -21,14 +21,15 @@ use crate::sim::controls::{control_names, CONTROL_COUNT, JAW_SLIDE, JAW_TWIST};
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::solver::solve_predicted;
 use crate::sim::{
-    solve, solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, State,
-    Workspace,
+    solve, solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, State, Workspace,
 };
 
 use super::observe::model_observer;
 
 /// The paper's 8 AUs of Table 2 (indices into `AU_NAMES`).
-pub const PAPER_AUS: [&str; 8] = ["AU01", "AU04", "AU06", "AU09", "AU12", "AU15", "AU20", "AU25"];
+pub const PAPER_AUS: [&str; 8] = [
+    "AU01", "AU04", "AU06", "AU09", "AU12", "AU15", "AU20", "AU25",
+];
 
 /// Zeng et al. Table 2: (row, the 8 AUs' MSE, mean over 17).
 pub const PAPER: [(&str, [f64; 8], f64); 4] = [
@@ -114,7 +115,7 @@ pub fn subjects(
 
 /// Solves a clip frame by frame (the first from rest, each next from the previous frame's
 /// equilibrium), calling `each` with every frame's state.
-fn solve_clip(
+pub fn solve_clip(
     model: &FaceModel,
     frames: &[Activations],
     first: impl Fn(&Activations, &mut Workspace) -> Result<State>,
@@ -141,15 +142,13 @@ pub fn observe_clip(
     observer: &Observer,
     kind: CohortKind,
     clip: &Clip,
-    noise_sd: f64,
-    seed: u64,
+    cohort: &CohortParams,
     params: &SolveParams,
     ws: &mut Workspace,
-    mut keep: impl FnMut(&State),
 ) -> Result<Vec<RefFrame>> {
+    let (noise_sd, seed) = (cohort.noise_sd, cohort.seed);
     let model = &subject.model;
-    let activations: Vec<Activations> =
-        clip.frames.iter().map(|f| f.activations.clone()).collect();
+    let activations: Vec<Activations> = clip.frames.iter().map(|f| f.activations.clone()).collect();
     let noise = ObserverNoise {
         noise_sd,
         gain_spread: 0.0,
@@ -177,7 +176,6 @@ pub fn observe_clip(
                 let label = format!("cohort/{}/noise/{}/{name}/{f}", kind.name(), clip.subject);
                 noise.apply(&mut aus, &[1.0; AU_COUNT], &mut stream(seed, &label));
             }
-            keep(state);
             out.push(RefFrame {
                 cohort: kind,
                 subject: clip.subject,
@@ -220,15 +218,7 @@ pub fn reference(
             let mut frames = Vec::new();
             for clip in clips(&subject, kind, p.clip(kind), p.seed) {
                 frames.extend(observe_clip(
-                    &subject,
-                    &observer,
-                    kind,
-                    &clip,
-                    p.noise_sd,
-                    p.seed,
-                    params,
-                    &mut ws,
-                    |_| {},
+                    &subject, &observer, kind, &clip, p, params, &mut ws,
                 )?);
                 tick();
             }
@@ -274,7 +264,11 @@ fn pairs_of(rows: &[[f64; AU_COUNT]]) -> Pairs {
 
 /// The per-AU affine map that takes `input`'s range (min-max) or mean and SD (z-score) onto
 /// `target`'s: `x -> (x - offset) * scale`. The identity when the two agree.
-pub fn range_map(kind: Normalization, input: &[[f64; AU_COUNT]], target: &Normalizer) -> Normalizer {
+pub fn range_map(
+    kind: Normalization,
+    input: &[[f64; AU_COUNT]],
+    target: &Normalizer,
+) -> Normalizer {
     let fitted = Normalizer::fit(kind, &pairs_of(input));
     fitted.onto(target)
 }
@@ -287,11 +281,33 @@ pub fn training_range(kind: Normalization, training_aus: &[[f64; AU_COUNT]]) -> 
 /// Network outputs as activations the base model accepts: each clamped to [0, 1], jaw slide
 /// and twist neutral.
 pub fn to_activations(out: &[f32]) -> Activations {
-    let mut values: [f64; CONTROL_COUNT] =
-        std::array::from_fn(|k| (out[k] as f64).clamp(0.0, 1.0));
+    let mut values: [f64; CONTROL_COUNT] = std::array::from_fn(|k| (out[k] as f64).clamp(0.0, 1.0));
     values[JAW_SLIDE] = 0.5;
     values[JAW_TWIST] = 0.5;
     Activations::from_values(&values).expect("clamped")
+}
+
+/// The unified network's activations for rows of reference AUs (after `map`, if any).
+pub fn predict_activations(
+    mlp: &Mlp,
+    map: Option<&Normalizer>,
+    rows: &[[f64; AU_COUNT]],
+) -> Result<Vec<Activations>> {
+    let inputs: Vec<f32> = rows.iter().flatten().map(|&v| v as f32).collect();
+    let inputs = match map {
+        Some(m) => m.apply(&inputs),
+        None => inputs,
+    };
+    if inputs.iter().any(|v| !v.is_finite()) {
+        bail!("reference AUs contain NaN or infinite values");
+    }
+    let out = mlp
+        .predict(&inputs)
+        .context("running the unified network")?;
+    Ok(out
+        .chunks_exact(CONTROL_COUNT)
+        .map(to_activations)
+        .collect())
 }
 
 /// One transferred frame.
@@ -316,24 +332,12 @@ pub fn transfer(
     params: &SolveParams,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<Vec<Transferred>>> {
-    let inputs: Vec<f32> = clips.iter().flatten().flatten().map(|&v| v as f32).collect();
-    let inputs = match map {
-        Some(m) => m.apply(&inputs),
-        None => inputs,
-    };
-    if inputs.iter().any(|v| !v.is_finite()) {
-        bail!("reference AUs contain NaN or infinite values");
-    }
-    let out = mlp.predict(&inputs).context("running the unified network")?;
-    let mut start = 0;
-    let mut jobs = Vec::with_capacity(clips.len());
-    for c in clips {
-        let acts: Vec<Activations> = (start..start + c.len())
-            .map(|i| to_activations(&out[i * CONTROL_COUNT..(i + 1) * CONTROL_COUNT]))
-            .collect();
-        start += c.len();
-        jobs.push(acts);
-    }
+    let rows: Vec<[f64; AU_COUNT]> = clips.iter().flatten().copied().collect();
+    let mut acts = predict_activations(mlp, map, &rows)?.into_iter();
+    let jobs: Vec<Vec<Activations>> = clips
+        .iter()
+        .map(|c| acts.by_ref().take(c.len()).collect())
+        .collect();
     jobs.par_iter()
         .enumerate()
         .map_init(
@@ -352,7 +356,8 @@ pub fn transfer(
                     ws,
                     params,
                     |_, state| {
-                        let o = observer.observe(&landmarks(state.surface(model.vertex_count())))?;
+                        let o =
+                            observer.observe(&landmarks(state.surface(model.vertex_count())))?;
                         frames.push(Transferred {
                             activations: *state.activations.values(),
                             aus: o.aus,
@@ -433,12 +438,17 @@ struct Line<'a> {
 impl Line<'_> {
     fn num(&self, k: usize) -> Result<f64> {
         self.cells[k].parse().with_context(|| {
-            format!("{}:{}: `{}` is not a number", self.name, self.line, self.cells[k])
+            format!(
+                "{}:{}: `{}` is not a number",
+                self.name, self.line, self.cells[k]
+            )
         })
     }
 
     fn array<const N: usize>(&self, from: usize) -> Result<[f64; N]> {
-        let v: Vec<f64> = (from..from + N).map(|k| self.num(k)).collect::<Result<_>>()?;
+        let v: Vec<f64> = (from..from + N)
+            .map(|k| self.num(k))
+            .collect::<Result<_>>()?;
         Ok(v.try_into().expect("N values"))
     }
 }
@@ -456,7 +466,11 @@ fn lines<'a>(text: &'a str, name: &'a str, expected: usize) -> Result<Vec<Line<'
         .map(|(i, l)| {
             let cells: Vec<&str> = l.split(',').collect();
             if cells.len() != expected {
-                bail!("{name}:{}: {} cells, expected {expected}", i + 2, cells.len());
+                bail!(
+                    "{name}:{}: {} cells, expected {expected}",
+                    i + 2,
+                    cells.len()
+                );
             }
             Ok(Line {
                 name,
@@ -470,9 +484,11 @@ fn lines<'a>(text: &'a str, name: &'a str, expected: usize) -> Result<Vec<Line<'
 fn parse_expression(l: &Line, k: usize) -> Result<Option<Expression>> {
     match l.cells[k] {
         "neutral" => Ok(None),
-        s => Ok(Some(s.parse().map_err(|e| {
-            anyhow::anyhow!("{}:{}: {e}", l.name, l.line)
-        })?)),
+        s => {
+            Ok(Some(s.parse().map_err(|e| {
+                anyhow::anyhow!("{}:{}: {e}", l.name, l.line)
+            })?))
+        }
     }
 }
 
@@ -554,7 +570,11 @@ mod tests {
                 assert!((s - 1.0).abs() < 1e-6, "scale {s}");
             }
         }
-        let z = range_map(Normalization::ZScore, &a, &training_range(Normalization::ZScore, &a));
+        let z = range_map(
+            Normalization::ZScore,
+            &a,
+            &training_range(Normalization::ZScore, &a),
+        );
         let x: Vec<f32> = a.iter().flatten().map(|&v| v as f32).collect();
         for (u, v) in z.apply(&x).iter().zip(&x) {
             assert!((u - v).abs() < 1e-5);

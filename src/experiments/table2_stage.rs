@@ -24,7 +24,7 @@ use crate::cache::{self, Cache};
 use crate::cohort::{CohortKind, Subject};
 use crate::learn::Mlp;
 use crate::observe::{Calibration, AU_COUNT, AU_NAMES};
-use crate::report::compose::{gif_bytes, labelled_grid, png_bytes, side_by_side};
+use crate::report::compose::{gif_bytes, labelled_grid, png_bytes};
 use crate::report::render::{render, RenderOptions};
 use crate::sim::basis::LinearBasis;
 use crate::sim::expression::Expression;
@@ -35,7 +35,7 @@ use crate::stats;
 
 const COHORT_VERSION: u32 = 1;
 const TRANSFER_VERSION: u32 = 1;
-const RENDERS_VERSION: u32 = 1;
+const RENDERS_VERSION: u32 = 2;
 
 /// What Table 2 needs from the rest of the cell.
 pub struct Inputs<'a> {
@@ -139,12 +139,7 @@ pub fn run(
     for (seed, train_key, mlp) in &inp.unified {
         let mut inputs = vec![cohort_key.as_str(), train_key.as_str(), inp.dataset_key];
         inputs.extend(inp.basis_key);
-        let key = cache::key(
-            "transfer",
-            TRANSFER_VERSION,
-            &values(&["table2."]),
-            &inputs,
-        );
+        let key = cache::key("transfer", TRANSFER_VERSION, &values(&["table2."]), &inputs);
         let t = Instant::now();
         let transfers = match cache.get("transfer", &key)? {
             Some(e) => {
@@ -166,7 +161,12 @@ pub fn run(
                             .collect();
                         let aus: Vec<Vec<[f64; AU_COUNT]>> = mine
                             .iter()
-                            .map(|r| reference_frames[(*r).clone()].iter().map(|f| f.aus).collect())
+                            .map(|r| {
+                                reference_frames[(*r).clone()]
+                                    .iter()
+                                    .map(|f| f.aus)
+                                    .collect()
+                            })
                             .collect();
                         let all: Vec<[f64; AU_COUNT]> = aus.iter().flatten().copied().collect();
                         let map = (setting == Setting::Normalized)
@@ -223,7 +223,11 @@ pub fn run(
     // Renders of the first seed.
     let key = cache::key("renders", RENDERS_VERSION, "", &[&first_key]);
     let t = Instant::now();
-    let names = ["transfer_grid.png", "onset_videos.gif", "talking_videos.gif"];
+    let names = [
+        "transfer_grid.png",
+        "onset_videos.gif",
+        "talking_videos.gif",
+    ];
     let renders = match cache.get("renders", &key)? {
         Some(e) => {
             let r = names
@@ -383,13 +387,19 @@ fn renders(
             .map(|&i| to_activations(&first[1].1[i].activations.map(|v| v as f32)))
             .collect();
         let transfer_states = states(inp.model, inp.basis, &transferred, params)?;
+        let title = format!("{} ({e})", kind.name().replace('_', " "));
+        let columns = ["subject 0".to_string(), "model, normalized".to_string()];
         let frames: Vec<RgbImage> = reference_states
             .iter()
             .zip(&transfer_states)
             .map(|(r, t)| {
-                side_by_side(&[render(&subj.model, r, &CELL), render(inp.model, t, &CELL)])
+                let cells = vec![vec![
+                    render(&subj.model, r, &CELL),
+                    render(inp.model, t, &CELL),
+                ]];
+                labelled_grid(&title, &cells, &[String::new()], &columns)
             })
-            .collect();
+            .collect::<Result<_>>()?;
         let delay = (1000.0 / inp.spec.cohort.clip(kind).fps).round() as u32;
         out.push((
             format!("{}.gif", kind.name()),
@@ -415,8 +425,16 @@ fn order() -> Vec<(CohortKind, Setting)> {
         .collect()
 }
 
+/// One table row over seeds: per AU then the mean over 17, the mean over seeds and the 95%
+/// interval.
+struct Summary {
+    key: (CohortKind, Setting),
+    mean: Vec<f64>,
+    ci: Vec<f64>,
+}
+
 /// Mean and 95% interval over seeds of each AU's MSE and of the mean, per table row.
-fn summary(rows: &[Row]) -> Vec<((CohortKind, Setting), Vec<f64>, Vec<f64>)> {
+fn summary(rows: &[Row]) -> Vec<Summary> {
     order()
         .into_iter()
         .map(|(k, s)| {
@@ -431,7 +449,11 @@ fn summary(rows: &[Row]) -> Vec<((CohortKind, Setting), Vec<f64>, Vec<f64>)> {
             };
             let mean = (0..=AU_COUNT).map(|j| stats::mean(&col(j))).collect();
             let ci = (0..=AU_COUNT).map(|j| stats::ci95(&col(j))).collect();
-            ((k, s), mean, ci)
+            Summary {
+                key: (k, s),
+                mean,
+                ci,
+            }
         })
         .collect()
 }
@@ -451,7 +473,12 @@ pub fn csv(rows: &[Row]) -> String {
         let v: Vec<f64> = r.mse.iter().copied().chain([r.mean()]).collect();
         out.push_str(&line(&r.seed.to_string(), r.cohort, r.setting, &v));
     }
-    for ((k, s), mean, ci) in summary(rows) {
+    for Summary {
+        key: (k, s),
+        mean,
+        ci,
+    } in summary(rows)
+    {
         out.push_str(&line("mean", k, s, &mean));
         out.push_str(&line("ci95", k, s, &ci));
     }
@@ -509,7 +536,12 @@ pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame]) -> String {
         table2::PAPER_AUS.join(" | "),
         "---|".repeat(aus.len())
     ));
-    for ((k, s), mean, ci) in summary(rows) {
+    for Summary {
+        key: (k, s),
+        mean,
+        ci,
+    } in summary(rows)
+    {
         let cell = |j: usize| {
             if seeds > 1 {
                 format!("{:.3} ± {:.3}", mean[j], ci[j])
@@ -554,7 +586,10 @@ pub fn tex(rows: &[Row]) -> String {
             .collect::<Vec<_>>()
             .join(" & ")
     ));
-    for ((k, s), mean, _) in summary(rows) {
+    for Summary {
+        key: (k, s), mean, ..
+    } in summary(rows)
+    {
         out.push_str(&format!(
             "{} & {} & {:.3} \\\\\n",
             row_name(k, s),
@@ -590,9 +625,21 @@ pub fn bars(path: &std::path::Path, rows: &[Row]) -> Result<()> {
     let groups: Vec<_> = summary(rows)
         .into_iter()
         .enumerate()
-        .map(|(i, ((k, s), mean, _))| (row_name(k, s), PALETTE[i % PALETTE.len()], mean))
+        .map(|(i, r)| {
+            (
+                row_name(r.key.0, r.key.1),
+                PALETTE[i % PALETTE.len()],
+                r.mean,
+            )
+        })
         .collect();
-    grouped_bars(path, "Table 2: per-AU MSE of transferred AUs", "MSE", &categories, &groups)
+    grouped_bars(
+        path,
+        "Table 2: per-AU MSE of transferred AUs",
+        "MSE",
+        &categories,
+        &groups,
+    )
 }
 
 /// The transfer's per-frame data for the first seed: reference and transferred AUs per setting.
@@ -622,6 +669,39 @@ pub fn frames_csv(reference: &[RefFrame], first: &[(Setting, Vec<Transferred>)])
             for v in &t[i].aus {
                 out.push_str(&format!(",{v:.4}"));
             }
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// Table 2 over a sweep: per cell, each cohort's mean AU MSE (over 17 AUs, mean over seeds)
+/// unnormalized and normalized.
+pub fn sweep_markdown(cells: &[(String, Vec<Row>)]) -> String {
+    let mut out = String::from(
+        "\n## Table 2: mean AU MSE over 17 AUs (unnormalized / normalized)\n\n| cell |",
+    );
+    for k in CohortKind::ALL {
+        out.push_str(&format!(" {} |", k.name().replace('_', " ")));
+    }
+    out.push_str(&format!(
+        "\n|---|{}\n",
+        "---|".repeat(CohortKind::ALL.len())
+    ));
+    for (name, rows) in cells {
+        let s = summary(rows);
+        let mean = |k: CohortKind, setting: Setting| -> f64 {
+            s.iter()
+                .find(|r| r.key == (k, setting))
+                .map_or(f64::NAN, |r| r.mean[AU_COUNT])
+        };
+        out.push_str(&format!("| {name} |"));
+        for k in CohortKind::ALL {
+            out.push_str(&format!(
+                " {:.4} / {:.4} |",
+                mean(k, Setting::Unnormalized),
+                mean(k, Setting::Normalized)
+            ));
         }
         out.push('\n');
     }

@@ -1,4 +1,4 @@
-//! Composite images: labelled grids of renders (the paper's Fig. 5), side-by-side frames, and
+//! Composite images: labelled grids of renders (the paper's Fig. 5 and video frames) and
 //! animated GIFs, as bytes so the harness can cache and write them atomically.
 
 use anyhow::Result;
@@ -33,21 +33,8 @@ pub fn gif_bytes(frames: &[RgbImage], delay_ms: u32) -> Result<Vec<u8>> {
     Ok(out)
 }
 
-/// Images side by side (all the same height).
-pub fn side_by_side(images: &[RgbImage]) -> RgbImage {
-    let h = images.iter().map(|i| i.height()).max().unwrap_or(0);
-    let w = images.iter().map(|i| i.width()).sum();
-    let mut out = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
-    let mut x = 0;
-    for i in images {
-        image::imageops::replace(&mut out, i, x as i64, 0);
-        x += i.width();
-    }
-    out
-}
-
 /// A grid of equally sized cells with a title, column labels on top and row labels on the
-/// left, text in the embedded font.
+/// left (no left margin when they are all empty), text in the embedded font.
 pub fn labelled_grid(
     title: &str,
     cells: &[Vec<RgbImage>],
@@ -61,7 +48,12 @@ pub fn labelled_grid(
         .map(|c| (c.width(), c.height()))
         .unwrap_or((1, 1));
     let columns = cells.iter().map(Vec::len).max().unwrap_or(0) as u32;
-    let (left, top) = (190u32, 70u32);
+    let left = if row_labels.iter().all(String::is_empty) {
+        0
+    } else {
+        190u32
+    };
+    let top = 70u32;
     let (w, h) = (left + columns * cw, top + cells.len() as u32 * ch);
     let mut canvas = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
     for (r, row) in cells.iter().enumerate() {

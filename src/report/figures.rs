@@ -126,12 +126,16 @@ pub fn grouped_bars(
         let lo = values.clone().fold(f64::INFINITY, f64::min).max(1e-12);
         let hi = values.fold(0.0f64, f64::max).max(lo * 10.0);
         let n = categories.len();
+        // Headroom above the bars for the legend (about 24 px per entry of a ~480 px plot),
+        // so it never covers a bar.
+        let legend = ((groups.len() as f64 * 24.0 + 16.0) / 480.0).min(0.6);
+        let top = hi * 2.0 * (4.0 * hi / lo).powf(legend / (1.0 - legend));
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 26))
             .margin(16)
             .x_label_area_size(50)
             .y_label_area_size(90)
-            .build_cartesian_2d(0f64..n as f64, (lo * 0.5..hi * 2.0).log_scale())?;
+            .build_cartesian_2d(0f64..n as f64, (lo * 0.5..top).log_scale())?;
         let cats = categories.to_vec();
         chart
             .configure_mesh()

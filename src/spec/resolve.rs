@@ -234,7 +234,14 @@ fn read_cohort(r: &mut Reader) -> Result<CohortParams, SpecError> {
         brow_height_sd: r.float("cohort.subjects.brow_height_sd", s.brow_height_sd, &nonneg)?,
         nose_sd: r.float("cohort.subjects.nose_sd", s.nose_sd, &nonneg)?,
         jaw_length_sd: r.float("cohort.subjects.jaw_length_sd", s.jaw_length_sd, &nonneg)?,
-        lip_thickness_sd: r.float("cohort.subjects.lip_thickness_sd", s.lip_thickness_sd, &nonneg)?,
+        lip_thickness_sd: r.float(
+            "cohort.subjects.lip_thickness_sd",
+            s.lip_thickness_sd,
+            &nonneg,
+        )?,
+        strength_median: r.float("cohort.subjects.strength_median", s.strength_median, &|v| {
+            (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
+        })?,
         strength_sd: r.float("cohort.subjects.strength_sd", s.strength_sd, &nonneg)?,
         muscle_strength_sd: r.float(
             "cohort.subjects.muscle_strength_sd",
@@ -351,7 +358,10 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
                 return Err(r.invalid(
                     node,
                     "tables",
-                    format!("may list only {}", TABLES.map(|t| format!("\"{t}\"")).join(", ")),
+                    format!(
+                        "may list only {}",
+                        TABLES.map(|t| format!("\"{t}\"")).join(", ")
+                    ),
                 ))
             }
         }

@@ -1,0 +1,272 @@
+//! `facelab transfer`: real OpenFace AUs -> [normalize] -> a run's unified network ->
+//! activations -> the base model -> our observer -> transferred AUs, frame by frame.
+//!
+//! The run folder (`results/<experiment>/run-NNNN`, default `results/paper/latest`) gives the
+//! network (`unified.safetensors`, the first seed's), the training data's per-AU statistics
+//! (`training_aus.csv`, what "normalized" maps onto) and the resolved spec (`spec.toml`: face
+//! subdivisions and solver tolerance). Only the `AUxx_r` columns of the input are used.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use image::RgbImage;
+
+use super::face::FaceSource;
+use super::observe::model_observer;
+use super::table2::{au_mse, predict_activations, solve_clip};
+use crate::io::atomic::write_atomic;
+use crate::io::calibration::{default_calibration_path, read_calibration};
+use crate::io::openface::{read_openface, write_openface, FaceRow};
+use crate::learn::{Mlp, Normalization, Normalizer};
+use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
+use crate::report::compose::gif_bytes;
+use crate::report::render::{render, RenderOptions};
+use crate::report::save_png;
+use crate::sim::controls::control_names;
+use crate::sim::{solve_from_rest, SolveParams, Workspace};
+
+#[derive(Clone, Debug)]
+pub struct TransferOptions {
+    pub openface: PathBuf,
+    /// A run folder with `unified.safetensors`, `training_aus.csv` and `spec.toml`.
+    pub model: PathBuf,
+    pub normalize: Normalization,
+    pub out: PathBuf,
+    /// Frames (the file's `frame` numbers) to render; empty: first, middle and last.
+    pub render_frames: Vec<i64>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransferSummary {
+    pub rows: usize,
+    pub skipped: usize,
+    pub mse: [f64; AU_COUNT],
+    pub written: Vec<PathBuf>,
+}
+
+impl TransferSummary {
+    pub fn mean(&self) -> f64 {
+        self.mse.iter().sum::<f64>() / AU_COUNT as f64
+    }
+}
+
+/// The training data's per-AU statistics as the normalizer `Normalizer::fit` would give.
+fn training_normalizer(path: &Path, kind: Normalization) -> Result<Normalizer> {
+    let text = std::fs::read_to_string(path).with_context(|| {
+        format!(
+            "{}: cannot read (a run of a spec with Table 1 writes it)",
+            path.display()
+        )
+    })?;
+    let mut offset = vec![0.0f32; AU_COUNT];
+    let mut scale = vec![1.0f32; AU_COUNT];
+    let mut seen = [false; AU_COUNT];
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let cells: Vec<&str> = line.split(',').collect();
+        let at = |k: usize| -> Result<f64> {
+            cells
+                .get(k)
+                .with_context(|| format!("{}:{}: too few cells", path.display(), i + 1))?
+                .parse()
+                .with_context(|| format!("{}:{}: not a number", path.display(), i + 1))
+        };
+        let k = AU_NAMES
+            .iter()
+            .position(|a| *a == cells[0])
+            .with_context(|| format!("{}:{}: unknown AU `{}`", path.display(), i + 1, cells[0]))?;
+        let (lo, hi, mean, sd) = (at(1)?, at(2)?, at(3)?, at(4)?);
+        seen[k] = true;
+        (offset[k], scale[k]) = match kind {
+            Normalization::None => (0.0, 1.0),
+            Normalization::MinMax => (
+                lo as f32,
+                if hi - lo > 1e-12 {
+                    (1.0 / (hi - lo)) as f32
+                } else {
+                    1.0
+                },
+            ),
+            Normalization::ZScore => (
+                mean as f32,
+                if sd > 1e-12 { (1.0 / sd) as f32 } else { 1.0 },
+            ),
+        };
+    }
+    if let Some(k) = seen.iter().position(|s| !s) {
+        bail!("{}: no row for {}", path.display(), AU_NAMES[k]);
+    }
+    Ok(Normalizer { offset, scale })
+}
+
+/// Runs the transfer and writes `transferred.csv`, `activations.csv`, `mse.csv`, renders of
+/// the chosen frames and, for more than one frame, `transfer.gif`.
+pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
+    let run = &opts.model;
+    let weights = run.join("unified.safetensors");
+    let bytes = std::fs::read(&weights).with_context(|| {
+        format!(
+            "{}: cannot read the unified network (run a spec with Table 1 first, e.g. \
+             `facelab run experiments/paper.toml`)",
+            weights.display()
+        )
+    })?;
+    let mlp = Mlp::from_safetensors(&bytes).with_context(|| format!("{}", weights.display()))?;
+    if mlp.inputs != AU_COUNT || mlp.outputs != crate::sim::CONTROL_COUNT {
+        bail!(
+            "{}: a {} -> {} network, not the unified 17 -> 56",
+            weights.display(),
+            mlp.inputs,
+            mlp.outputs
+        );
+    }
+    let spec_path = run.join("spec.toml");
+    let spec = crate::spec::load(&spec_path, &[])
+        .with_context(|| format!("{}: the run's spec", spec_path.display()))?
+        .remove(0)
+        .spec;
+
+    let file = read_openface(&opts.openface)?;
+    if file.rows.is_empty() {
+        bail!(
+            "{}: no row with success = 1 ({} skipped)",
+            opts.openface.display(),
+            file.skipped
+        );
+    }
+    let reference: Vec<[f64; AU_COUNT]> = file.rows.iter().map(|r| r.aus).collect();
+    let map = match opts.normalize {
+        Normalization::None => None,
+        kind => {
+            let target = training_normalizer(&run.join("training_aus.csv"), kind)?;
+            Some(super::table2::range_map(kind, &reference, &target))
+        }
+    };
+    let acts = predict_activations(&mlp, map.as_ref(), &reference)?;
+
+    let source = FaceSource {
+        subdivisions: spec.dataset.subdivisions,
+        ..FaceSource::default()
+    };
+    let model = source.model()?;
+    let observer = model_observer(
+        &model,
+        read_calibration(&default_calibration_path())?.calibration(),
+    )?;
+    let params = SolveParams {
+        tolerance: spec.dataset.tolerance,
+        ..SolveParams::default()
+    };
+    let n = file.rows.len();
+    let wanted: Vec<i64> = if opts.render_frames.is_empty() {
+        let mut v = vec![
+            file.rows[0].frame,
+            file.rows[n / 2].frame,
+            file.rows[n - 1].frame,
+        ];
+        v.dedup();
+        v
+    } else {
+        opts.render_frames.clone()
+    };
+    for f in &wanted {
+        if !file.rows.iter().any(|r| r.frame == *f) {
+            bail!(
+                "{}: no used row with frame {f} to render",
+                opts.openface.display()
+            );
+        }
+    }
+    let gif_every = n.div_ceil(300).max(1);
+    let cell = RenderOptions {
+        width: 240,
+        height: 280,
+        ..RenderOptions::default()
+    };
+    let mut transferred = Vec::with_capacity(n);
+    let mut stills: Vec<(i64, RgbImage)> = Vec::new();
+    let mut frames: Vec<RgbImage> = Vec::new();
+    let mut ws = Workspace::new(&model);
+    solve_clip(
+        &model,
+        &acts,
+        |a, ws| Ok(solve_from_rest(&model, a, ws, &params)?.0),
+        &mut ws,
+        &params,
+        |i, state| {
+            let o = observer.observe(&landmarks(state.surface(model.vertex_count())))?;
+            transferred.push(o.aus);
+            let frame = file.rows[i].frame;
+            if wanted.contains(&frame) {
+                stills.push((frame, render(&model, state, &RenderOptions::default())));
+            }
+            if n > 1 && i % gif_every == 0 {
+                frames.push(render(&model, state, &cell));
+            }
+            Ok(())
+        },
+    )
+    .with_context(|| format!("{}: transferring", opts.openface.display()))?;
+
+    let out = &opts.out;
+    let mut written = Vec::new();
+    let rows: Vec<FaceRow> = file
+        .rows
+        .iter()
+        .zip(&transferred)
+        .map(|(r, aus)| FaceRow {
+            aus: *aus,
+            pose: None,
+            landmarks_2d: None,
+            landmarks_3d: None,
+            ..r.clone()
+        })
+        .collect();
+    let path = out.join("transferred.csv");
+    write_openface(&path, &rows)?;
+    written.push(path);
+
+    let mut text = format!("frame,{}\n", control_names().join(","));
+    for (r, a) in file.rows.iter().zip(&acts) {
+        text.push_str(&r.frame.to_string());
+        for v in a.values() {
+            text.push_str(&format!(",{v:.6}"));
+        }
+        text.push('\n');
+    }
+    let mut write = |name: &str, bytes: &[u8]| -> Result<()> {
+        let path = out.join(name);
+        write_atomic(&path, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
+        written.push(path);
+        Ok(())
+    };
+    write("activations.csv", text.as_bytes())?;
+    let mse = au_mse(&reference, &transferred);
+    let mut text = String::from("au,mse\n");
+    for (a, m) in AU_NAMES.iter().zip(&mse) {
+        text.push_str(&format!("{a},{m:.6e}\n"));
+    }
+    text.push_str(&format!(
+        "mean,{:.6e}\n",
+        mse.iter().sum::<f64>() / AU_COUNT as f64
+    ));
+    write("mse.csv", text.as_bytes())?;
+    if frames.len() > 1 {
+        let dt = match (file.rows[0].timestamp, file.rows[n - 1].timestamp) {
+            (Some(a), Some(b)) if b > a => (b - a) / (n - 1) as f64,
+            _ => 1.0 / 30.0,
+        };
+        let delay = (1000.0 * dt * gif_every as f64).round().max(20.0) as u32;
+        write("transfer.gif", &gif_bytes(&frames, delay)?)?;
+    }
+    for (frame, image) in &stills {
+        let path = out.join(format!("frame_{frame:05}.png"));
+        save_png(image, &path)?;
+        written.push(path);
+    }
+    Ok(TransferSummary {
+        rows: n,
+        skipped: file.skipped,
+        mse,
+        written,
+    })
+}

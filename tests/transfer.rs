@@ -1,0 +1,279 @@
+//! Table 2's pieces: cohort subjects, transfer through the committed paper network, and
+//! `facelab transfer` on OpenFace files (good and bad).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use facelab::cohort::{clips, CohortKind, CohortParams, Subject, SubjectParams};
+use facelab::experiments::face::FaceSource;
+use facelab::experiments::observe::model_observer;
+use facelab::experiments::table2::{au_mse, observe_clip, transfer};
+use facelab::io::calibration::{default_calibration_path, read_calibration};
+use facelab::learn::Mlp;
+use facelab::observe::AU_COUNT;
+use facelab::sim::{SolveParams, Workspace};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("facelab-transfer-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn facelab(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .expect("run facelab")
+}
+
+/// The committed paper run (its unified network and training statistics).
+fn paper_run() -> PathBuf {
+    root().join("results/paper/latest")
+}
+
+fn identical() -> SubjectParams {
+    SubjectParams {
+        face_width_sd: 0.0,
+        brow_height_sd: 0.0,
+        nose_sd: 0.0,
+        jaw_length_sd: 0.0,
+        lip_thickness_sd: 0.0,
+        strength_median: 1.0,
+        strength_sd: 0.0,
+        muscle_strength_sd: 0.0,
+        stiffness_sd: 0.0,
+        weight_sd: 0.0,
+        extra_muscle_probability: 0.0,
+        extra_muscle_weight: 0.4,
+    }
+}
+
+#[test]
+fn subjects_differ_from_the_base_face_but_keep_its_topology() {
+    let source = FaceSource::default();
+    let (mesh, weights) = (source.mesh().unwrap(), source.weights().unwrap());
+    let base = crate::model();
+    let same = Subject::draw(&mesh, source.params(), &weights, &identical(), 1, "t", 0).unwrap();
+    assert_eq!(same.model.surface.positions, base.surface.positions);
+    assert_eq!(same.model.tissue.rest, base.tissue.rest);
+
+    let p = SubjectParams::default();
+    let a = Subject::draw(&mesh, source.params(), &weights, &p, 1, "t", 0).unwrap();
+    let again = Subject::draw(&mesh, source.params(), &weights, &p, 1, "t", 0).unwrap();
+    let b = Subject::draw(&mesh, source.params(), &weights, &p, 1, "t", 1).unwrap();
+    assert_eq!(a.model.surface.positions, again.model.surface.positions);
+    assert_ne!(a.model.surface.positions, b.model.surface.positions);
+    assert_eq!(a.model.surface.triangles, base.surface.triangles);
+    // Morphs are a few millimetres, not a different face.
+    let moved = a
+        .model
+        .surface
+        .positions
+        .iter()
+        .zip(&base.surface.positions)
+        .map(|(p, q)| {
+            ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+        })
+        .fold(0.0, f64::max);
+    assert!(moved > 5e-4 && moved < 0.02, "largest morph {moved} m");
+    assert_ne!(a.strength, 1.0);
+}
+
+#[test]
+fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
+    let source = FaceSource::default();
+    let (mesh, weights) = (source.mesh().unwrap(), source.weights().unwrap());
+    let calibration = read_calibration(&default_calibration_path())
+        .unwrap()
+        .calibration();
+    let subject = Subject::draw(&mesh, source.params(), &weights, &identical(), 1, "t", 0).unwrap();
+    let observer = model_observer(&subject.model, calibration).unwrap();
+    let cohort = CohortParams {
+        noise_sd: 0.0,
+        ..CohortParams::default()
+    };
+    let mut p = cohort.images;
+    p.head_rotation_sd = 0.0;
+    let params = SolveParams::default();
+    let mut ws = Workspace::new(&subject.model);
+    let mut reference = Vec::new();
+    for clip in clips(&subject, CohortKind::Images, &p, 1) {
+        let frames = observe_clip(
+            &subject,
+            &observer,
+            CohortKind::Images,
+            &clip,
+            &cohort,
+            &params,
+            &mut ws,
+        )
+        .unwrap();
+        reference.push(vec![frames[0].aus]);
+    }
+    assert_eq!(reference.len(), 7);
+    let bytes = std::fs::read(paper_run().join("unified.safetensors")).unwrap();
+    let mlp = Mlp::from_safetensors(&bytes).unwrap();
+    let model = crate::model();
+    let out = transfer(
+        model,
+        None,
+        &observer,
+        &mlp,
+        None,
+        &reference,
+        &params,
+        &|| {},
+    )
+    .unwrap();
+    let r: Vec<[f64; AU_COUNT]> = reference.iter().map(|c| c[0]).collect();
+    let t: Vec<[f64; AU_COUNT]> = out.iter().map(|c| c[0].aus).collect();
+    let mse = au_mse(&r, &t);
+    let mean = mse.iter().sum::<f64>() / AU_COUNT as f64;
+    println!("own expressions back: mean AU MSE {mean:.5}, per AU {mse:.4?}");
+    // Measured with the committed paper network: 5.1e-4 (AU14, which the model confounds
+    // with AU20 and AU15, is the largest at 7e-3); the bound leaves 4x room.
+    assert!(mean < 2e-3, "mean AU MSE {mean}: {mse:?}");
+}
+
+/// An OpenFace file as FeatureExtraction writes it with `, ` separators and no face_id,
+/// with `frames` rows of a joy onset (AU06, AU12, AU25 rising) and one failed frame.
+fn joy_file(dir: &Path, frames: usize) -> PathBuf {
+    let aus = facelab::observe::AU_NAMES;
+    let mut text = String::from("frame, timestamp, confidence, success");
+    for a in aus {
+        text.push_str(&format!(", {a}_r"));
+    }
+    text.push('\n');
+    for f in 0..frames {
+        let t = f as f64 / (frames - 1).max(1) as f64;
+        let success = if f == 1 { 0 } else { 1 };
+        text.push_str(&format!(
+            "{}, {:.3}, 0.98, {success}",
+            f + 1,
+            f as f64 / 30.0
+        ));
+        for a in aus {
+            let v = match a {
+                "AU06" => 2.0 * t,
+                "AU12" => 2.8 * t,
+                "AU25" => 1.2 * t,
+                _ => 0.05,
+            };
+            text.push_str(&format!(", {v:.2}"));
+        }
+        text.push('\n');
+    }
+    let path = dir.join("joy.csv");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn transfer_command_writes_every_output_for_a_video() {
+    let dir = temp("video");
+    let input = joy_file(&dir, 6);
+    let out = dir.join("out");
+    let run = paper_run().display().to_string();
+    let o = facelab(&[
+        "transfer",
+        "--openface",
+        input.to_str().unwrap(),
+        "--model",
+        &run,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("5 frames transferred, 1 skipped"),
+        "{stdout}"
+    );
+
+    let transferred = std::fs::read_to_string(out.join("transferred.csv")).unwrap();
+    let lines: Vec<&str> = transferred.lines().collect();
+    assert_eq!(lines.len(), 6);
+    assert!(lines[0].starts_with("frame,"));
+    assert!(lines[0].contains("AU12_r"));
+    let frames: Vec<&str> = lines[1..]
+        .iter()
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert_eq!(frames, ["1", "3", "4", "5", "6"]);
+
+    let acts = std::fs::read_to_string(out.join("activations.csv")).unwrap();
+    let header: Vec<&str> = acts.lines().next().unwrap().split(',').collect();
+    assert_eq!(header.len(), 57);
+    assert!(header.contains(&"zygomaticus_major_left"));
+    let mse = std::fs::read_to_string(out.join("mse.csv")).unwrap();
+    assert_eq!(mse.lines().count(), 19);
+    assert!(mse.lines().last().unwrap().starts_with("mean,"));
+    for f in [
+        "transfer.gif",
+        "frame_00001.png",
+        "frame_00004.png",
+        "frame_00006.png",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+
+    // The transferred face smiles more at the end than at the start.
+    let au12 = |line: &str| -> f64 {
+        let k = lines[0].split(',').position(|c| c == "AU12_r").unwrap();
+        line.split(',').nth(k).unwrap().parse().unwrap()
+    };
+    assert!(au12(lines[5]) > au12(lines[1]) + 0.5, "{transferred}");
+}
+
+#[test]
+fn transfer_command_rejects_bad_input_with_the_offender_named() {
+    let dir = temp("bad");
+    let run = paper_run().display().to_string();
+    let out = dir.join("out");
+    let go = |input: &Path, model: &str| {
+        facelab(&[
+            "transfer",
+            "--openface",
+            input.to_str().unwrap(),
+            "--model",
+            model,
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let good = joy_file(&dir, 3);
+
+    let text = std::fs::read_to_string(&good).unwrap();
+    let bad = dir.join("text.csv");
+    std::fs::write(&bad, text.replacen("0.05", "abc", 1)).unwrap();
+    let o = go(&bad, &run);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("text.csv") && err.contains(":2"), "{err}");
+
+    let failed = dir.join("failed.csv");
+    std::fs::write(&failed, text.replace(", 1, ", ", 0, ")).unwrap();
+    let o = go(&failed, &run);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("no row with success = 1"), "{err}");
+
+    let no_aus = dir.join("no_aus.csv");
+    std::fs::write(&no_aus, "frame, success\n1, 1\n").unwrap();
+    let o = go(&no_aus, &run);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("no_aus.csv"), "{err}");
+
+    let o = go(&good, dir.to_str().unwrap());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("unified.safetensors"), "{err}");
+    assert!(!out.exists(), "a failed transfer wrote {}", out.display());
+}
