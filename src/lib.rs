@@ -11,7 +11,9 @@
 
 pub mod cache;
 pub mod cohort;
+pub mod edit;
 pub mod experiments;
+pub mod invert;
 pub mod io;
 pub mod learn;
 pub mod observe;

@@ -193,6 +193,42 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Edit activation curves (frame + one column per control) with keyframes: a cubic
+    /// B-spline displacement map meets every key and keeps the rest (Choe et al. 2001).
+    Edit {
+        /// Curves CSV, e.g. the activations.csv of `facelab transfer`
+        #[arg(long)]
+        curves: PathBuf,
+        /// FRAME:name=value[,name=value...]; repeatable
+        #[arg(long = "key", value_name = "FRAME:NAME=VALUE", required = true)]
+        keys: Vec<String>,
+        /// Spacing of the B-spline knots (frames): larger is smoother and wider
+        #[arg(long, default_value_t = 8.0)]
+        knot_spacing: f64,
+        #[arg(long)]
+        out: PathBuf,
+        /// Also plot the first keyed curve (original, displacement, edited) as PNG
+        #[arg(long)]
+        figure: Option<PathBuf>,
+        /// Knot spacings shown in the figure
+        #[arg(long, value_delimiter = ',', default_value = "4,12")]
+        figure_spacings: Vec<f64>,
+    },
+    /// Apply one activation sequence to the base face and to cohort subjects of other
+    /// geometry: a grid of renders and an animated GIF (Choe et al.'s retargeting).
+    Retarget {
+        /// Curves CSV (frame + one column per control), e.g. `facelab transfer`'s activations.csv
+        #[arg(long)]
+        curves: PathBuf,
+        /// How many image-cohort subjects beside the base face
+        #[arg(long, default_value_t = 3)]
+        subjects: usize,
+        /// Frames shown in the grid
+        #[arg(long, value_delimiter = ',', required = true)]
+        frames: Vec<f64>,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Benchmarks (run with --release).
     Bench {
         #[command(subcommand)]
@@ -395,6 +431,35 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("{a} {m:.4}");
             }
             for p in &summary.written {
+                println!("wrote {}", p.display());
+            }
+        }
+        Command::Edit {
+            curves,
+            keys,
+            knot_spacing,
+            out,
+            figure,
+            figure_spacings,
+        } => {
+            let written = facelab::experiments::editing::edit_file(
+                &curves,
+                &keys,
+                knot_spacing,
+                &out,
+                figure.as_deref().map(|f| (f, figure_spacings.as_slice())),
+            )?;
+            for p in written {
+                println!("wrote {}", p.display());
+            }
+        }
+        Command::Retarget {
+            curves,
+            subjects,
+            frames,
+            out,
+        } => {
+            for p in facelab::experiments::editing::retarget(&curves, subjects, &frames, &out)? {
                 println!("wrote {}", p.display());
             }
         }

@@ -1,6 +1,7 @@
 //! Integration tests, one binary (see STYLE.md): `sim` physics, the
 //! observer, OpenFace files, the command line and Table 2's transfer.
 
+mod choe;
 mod cli;
 mod harness;
 mod observe;

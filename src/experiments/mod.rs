@@ -2,7 +2,9 @@
 
 pub mod bench;
 pub mod dataset;
+pub mod editing;
 pub mod face;
+pub mod inversion;
 pub mod observe;
 pub mod run;
 pub mod table1;

@@ -21,6 +21,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::dataset::{self, Sample, SolveStart};
 use super::face::FaceSource;
+use super::inversion;
 use super::observe::model_observer;
 use super::table1::{self, Network, Row};
 use super::table2;
@@ -123,7 +124,9 @@ struct Keys {
 
 fn keys(spec: &Spec, a: &Assets) -> Keys {
     let face = format!("face={}\n", a.face);
-    let basis = (spec.dataset.start == SolveStart::Predicted).then(|| {
+    let needs_basis =
+        spec.dataset.start == SolveStart::Predicted || spec.tables.iter().any(|t| t == "inversion");
+    let basis = needs_basis.then(|| {
         let v = format!(
             "{face}dataset.subdivisions = {}\ndataset.tolerance = {}\n",
             spec.dataset.subdivisions, spec.dataset.tolerance
@@ -253,6 +256,7 @@ fn curves_from(text: &str) -> Curves {
 struct CellResult {
     rows: Vec<Row>,
     table2: Option<Table2Result>,
+    inversion: Option<inversion::Output>,
     /// The first seed's unified network (safetensors) and the training AUs' per-AU
     /// statistics, for `facelab transfer --model`.
     unified: Vec<u8>,
@@ -401,6 +405,7 @@ fn run_cell(
 
     let wants_table2 = spec.tables.iter().any(|t| t == "table2");
     let calibration = read_calibration(&default_calibration_path())?.calibration();
+    let mut inversion_out = None;
     let table2 = if wants_table2 {
         let model = source.model()?;
         let basis = load_basis(&k, cache, &model, spec, &mut record)?;
@@ -422,7 +427,36 @@ fn run_cell(
             basis: basis.as_ref(),
             calibration: &calibration,
         };
-        Some(table2_stage::run(&inputs, cache, &mut record, &bar)?)
+        let t2 = table2_stage::run(&inputs, cache, &mut record, &bar)?;
+        if spec.tables.iter().any(|t| t == "inversion") {
+            let basis = basis.as_ref().expect("inversion always has a basis key");
+            let inverter = inversion::Inverter::new(&model, basis, &calibration)?;
+            let (seed, train_key, mlp) = &inputs.unified[0];
+            let mut keys = vec![
+                t2.cohort_key.as_str(),
+                train_key.as_str(),
+                k.dataset.as_str(),
+            ];
+            keys.extend(k.basis.as_deref());
+            let training: Vec<_> = samples.iter().map(|s| s.aus).collect();
+            inversion_out = Some(
+                inversion::stage(
+                    spec,
+                    &source,
+                    cache,
+                    &mut record,
+                    &bar,
+                    &keys,
+                    &inverter,
+                    &calibration,
+                    &t2.reference,
+                    mlp,
+                    &training,
+                )
+                .with_context(|| format!("the inversion table (network of seed {seed})"))?,
+            );
+        }
+        Some(t2)
     } else {
         None
     };
@@ -441,6 +475,7 @@ fn run_cell(
     Ok(CellResult {
         rows,
         table2,
+        inversion: inversion_out,
         unified,
         training_aus: training_aus_csv(&samples),
         curves,
@@ -767,6 +802,26 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 &mut outputs,
             )?;
         }
+        if let Some(iv) = &result.inversion {
+            write(
+                format!("{prefix}inversion.csv"),
+                iv.csv.clone().into_bytes(),
+                &mut outputs,
+            )?;
+            write(
+                format!("{prefix}inversion_timing.csv"),
+                iv.timing.clone().into_bytes(),
+                &mut outputs,
+            )?;
+            if cells.len() == 1 {
+                write_atomic(
+                    &out_root
+                        .join("paper-tables")
+                        .join(format!("{}inversion.md", cell.spec.report_prefix)),
+                    iv.markdown.as_bytes(),
+                )?;
+            }
+        }
         if let Some(t2) = &result.table2 {
             write(
                 format!("{prefix}table2.csv"),
@@ -1048,7 +1103,8 @@ pub fn verify(run_dir: &Path, threads: usize) -> Result<Vec<String>> {
     )?;
     let mut differ = Vec::new();
     for (name, hash) in outputs {
-        if !name.ends_with(".csv") {
+        // Timings are measurements of this machine, not results.
+        if !name.ends_with(".csv") || name.ends_with("_timing.csv") {
             continue;
         }
         if summary.outputs.get(name).map(String::as_str) != hash.as_str() {

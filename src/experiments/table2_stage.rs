@@ -54,6 +54,7 @@ pub struct Inputs<'a> {
 }
 
 pub struct Table2Result {
+    pub cohort_key: String,
     pub rows: Vec<Row>,
     pub reference: Vec<RefFrame>,
     /// The first seed's transfers, per setting, aligned with `reference`.
@@ -245,6 +246,7 @@ pub fn run(
         }
     };
     Ok(Table2Result {
+        cohort_key,
         rows,
         reference: reference_frames,
         first,

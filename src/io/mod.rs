@@ -4,6 +4,7 @@
 
 pub mod atomic;
 pub mod calibration;
+pub mod curves;
 pub mod expressions;
 pub mod facs;
 pub mod mesh;

@@ -216,6 +216,18 @@ impl Observer {
         &self,
         current: &[V3; LANDMARK_COUNT],
     ) -> Result<([f64; AU_COUNT], HeadPose), ObserveError> {
+        let (c, r) = self.aligned(current)?;
+        // Head rotation relative to the neutral face, about the camera's (model's) axes.
+        let pose = HeadPose::from_rotation(&r);
+        Ok((measures(&self.frame_neutral, &c, self.aperture), pose))
+    }
+
+    /// `current` with the head motion undone, in the neutral face's frame (IOD units), and
+    /// the head rotation.
+    fn aligned(
+        &self,
+        current: &[V3; LANDMARK_COUNT],
+    ) -> Result<([V3; LANDMARK_COUNT], Rot3), ObserveError> {
         if let Some(i) = current
             .iter()
             .position(|p| p.iter().any(|c| !c.is_finite()))
@@ -230,11 +242,18 @@ impl Observer {
             let d = sub(current[i], t);
             transpose_apply(&r, d)
         });
-        let c = self.to_frame(&back);
-        let n = &self.frame_neutral;
-        // Head rotation relative to the neutral face, about the camera's (model's) axes.
-        let pose = HeadPose::from_rotation(&r);
-        Ok((measures(n, &c, self.aperture), pose))
+        Ok((self.to_frame(&back), r))
+    }
+
+    /// Landmark displacements from the neutral face with the head motion undone, in the
+    /// neutral face's frame and IOD units: comparable across faces of different size (the
+    /// marker displacements of Choe et al.'s eq. 10).
+    pub fn displacements(
+        &self,
+        current: &[V3; LANDMARK_COUNT],
+    ) -> Result<[V3; LANDMARK_COUNT], ObserveError> {
+        let (c, _) = self.aligned(current)?;
+        Ok(std::array::from_fn(|i| sub(c[i], self.frame_neutral[i])))
     }
 
     /// Intensities (0..5) and head pose of `current`.

@@ -186,3 +186,77 @@ pub fn grouped_bars(
     }
     save(buffer, size, path)
 }
+
+/// One row of the editing figure: a knot spacing's displacement map and edited curve.
+pub struct EditRow {
+    pub label: String,
+    pub displacement: Vec<f64>,
+    pub edited: Vec<f64>,
+}
+
+/// Choe et al.'s Fig. 7: per knot spacing (rows), the original curve with its keys, the
+/// displacement map, and the edited curve with the keys.
+pub fn edit_figure(
+    path: &Path,
+    title: &str,
+    frames: &[f64],
+    original: &[f64],
+    keys: &[(f64, f64)],
+    rows: &[EditRow],
+) -> Result<()> {
+    register_font();
+    let size = (1500u32, 60 + 330 * rows.len() as u32);
+    let mut buffer = vec![255u8; (size.0 * size.1 * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, size).into_drawing_area();
+        root.fill(&WHITE)?;
+        let root = root.titled(title, ("sans-serif", 26))?;
+        let cells = root.split_evenly((rows.len(), 3));
+        let (x0, x1) = (
+            frames.first().copied().unwrap_or(0.0),
+            frames.last().copied().unwrap_or(1.0).max(frames[0] + 1.0),
+        );
+        let dmax = rows
+            .iter()
+            .flat_map(|r| r.displacement.iter().map(|v| v.abs()))
+            .fold(0.05f64, f64::max)
+            * 1.15;
+        for (r, row) in rows.iter().enumerate() {
+            // (panel, values, draw the keys, y range)
+            type Panel<'a> = (&'a str, &'a [f64], bool, (f64, f64));
+            let panels: [Panel; 3] = [
+                ("original and keys", original, true, (0.0, 1.0)),
+                ("displacement map", &row.displacement, false, (-dmax, dmax)),
+                ("edited", &row.edited, true, (0.0, 1.0)),
+            ];
+            for (c, (name, values, show_keys, (lo, hi))) in panels.into_iter().enumerate() {
+                let mut chart = ChartBuilder::on(&cells[r * 3 + c])
+                    .caption(format!("{name} ({})", row.label), ("sans-serif", 18))
+                    .margin(10)
+                    .x_label_area_size(36)
+                    .y_label_area_size(50)
+                    .build_cartesian_2d(x0..x1, lo..hi)?;
+                chart
+                    .configure_mesh()
+                    .x_desc("frame")
+                    .x_label_formatter(&|v| format!("{v:.0}"))
+                    .y_label_formatter(&|v| format!("{:.1}", if v.abs() < 1e-9 { 0.0 } else { *v }))
+                    .label_style(("sans-serif", 14))
+                    .axis_desc_style(("sans-serif", 15))
+                    .draw()?;
+                chart.draw_series(LineSeries::new(
+                    frames.iter().copied().zip(values.iter().copied()),
+                    ShapeStyle::from(&PALETTE[1]).stroke_width(2),
+                ))?;
+                if show_keys {
+                    chart.draw_series(
+                        keys.iter()
+                            .map(|&(x, y)| Circle::new((x, y), 6, PALETTE[5].filled())),
+                    )?;
+                }
+            }
+        }
+        root.present()?;
+    }
+    save(buffer, size, path)
+}

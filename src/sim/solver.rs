@@ -652,6 +652,9 @@ fn gradient_norm(ws: &Workspace) -> f64 {
 }
 
 /// Newton iterations at fixed `pose` from the positions in `state`.
+/// Force imbalance (N) below which a pose counts as unloaded.
+const NO_LOAD: f64 = 1e-9;
+
 fn newton(
     model: &FaceModel,
     pose: &Pose,
@@ -666,7 +669,10 @@ fn newton(
     if !scale_norm.is_finite() {
         return Err(SolveError::NonFinite { iteration: 0 });
     }
-    if scale_norm == 0.0 {
+    // No load (neutral activations): the rest positions are the equilibrium. The floor is
+    // far below any activation's force (a muscle at 1e-6 pulls with ~1e-6 N) and above the
+    // round-off of an unloaded assembly (~1e-16 N), which no Newton step can reduce.
+    if scale_norm <= NO_LOAD {
         state.positions = rest;
         return Ok(SolveReport::default());
     }

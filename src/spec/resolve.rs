@@ -9,12 +9,13 @@ use super::raw::{set_path, Node, Origin, Value};
 use super::SpecError;
 use crate::cohort::{ClipParams, CohortKind, CohortParams, SubjectParams};
 use crate::experiments::dataset::{DatasetParams, SolveStart};
+use crate::experiments::inversion::InversionParams;
 use crate::learn::params::{ModelParams, Normalization, TrainParams};
 use crate::observe::ObserverNoise;
 use crate::sim::controls::edit_distance;
 
 /// The tables a spec can ask for.
-pub const TABLES: [&str; 2] = ["table1", "table2"];
+pub const TABLES: [&str; 3] = ["table1", "table2", "inversion"];
 
 /// Everything a run needs, validated.
 #[derive(Clone, Debug, PartialEq)]
@@ -35,6 +36,8 @@ pub struct Spec {
     /// How Table 2's normalized rows map reference AUs into the training range
     /// (`table2.normalization`: "minmax" or "zscore"; default "minmax").
     pub table2_normalization: Normalization,
+    /// The inversion table (`[inversion]`), used when `tables` has "inversion".
+    pub inversion: InversionParams,
     /// Prefix of the paper-table and figure names (`report.prefix`), so a smoke or test run
     /// does not overwrite the committed `paper-tables/table1.md`. Default "".
     pub report_prefix: String,
@@ -413,6 +416,24 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         )?)
         .expect("choice checked"),
     };
+    if tables.iter().any(|t| t == "inversion") && !tables.iter().any(|t| t == "table2") {
+        if let Some(node) = r.get("tables") {
+            return Err(r.invalid(
+                node,
+                "tables",
+                "lists \"inversion\" without \"table2\", whose cohorts and network it uses".into(),
+            ));
+        }
+    }
+    let iv = InversionParams::default();
+    let inversion = InversionParams {
+        frame_stride: r.integer("inversion.frame_stride", iv.frame_stride as i64, 1, 100_000)?
+            as usize,
+        penalty: r.float("inversion.penalty", iv.penalty, &|v| {
+            (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
+        })?,
+        refinements: r.integer("inversion.refinements", iv.refinements as i64, 0, 20)? as usize,
+    };
     let cohort = read_cohort(&mut r)?;
     let table2_normalization =
         Normalization::parse(&r.choice("table2.normalization", "minmax", &["minmax", "zscore"])?)
@@ -451,6 +472,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         train,
         cohort,
         table2_normalization,
+        inversion,
         values,
     })
 }

@@ -1,0 +1,574 @@
+//! The inversion table (issue: Choe et al. 2001 in facelab): on Table 2's cohorts, how well
+//! and how fast each way of getting activations from a real face does, all judged the same
+//! way (activations -> base model, nonlinear solve from the basis prediction -> observer ->
+//! AU MSE against the reference):
+//! - `network` / `network_normalized`: the unified network (Table 2's two settings);
+//! - `landmarks_pg`: landmark-space optimization (Choe eq. 10) over the linear basis, box
+//!   constraints by accelerated projected gradient;
+//! - `landmarks_sd`: the same objective with Choe's penalty and plain steepest descent
+//!   (iterations and time, for comparison; its activations are scored too);
+//! - `aus_basis`: AU-space optimization through the linear basis (projected Gauss-Newton);
+//! - `aus_refined`: `aus_basis` corrected by the nonlinear solve (defect correction: the
+//!   basis' AU error at the current activations is subtracted from the target, and the
+//!   basis fit repeated; the iterate whose nonlinear face is closest is kept, and an iterate
+//!   the nonlinear solve cannot reach ends the corrections). The best any
+//!   AU -> activation map can do on our model, to within the optimizer: what Table 2's error
+//!   owes to the model rather than the network.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+
+use super::table2::{predict_activations, range_map, training_range, RefFrame};
+use crate::cohort::{CohortKind, CohortParams, Subject};
+use crate::invert::{au_fit, penalty_descent, projected_gradient, BoxQp};
+use crate::learn::{Mlp, Normalization};
+use crate::observe::au::AU_MAX;
+use crate::observe::{landmarks, Calibration, Observer, AU_COUNT, LANDMARK_COUNT};
+use crate::sim::basis::LinearBasis;
+use crate::sim::controls::{CONTROL_COUNT, JAW_ROTATION, JAW_SLIDE, JAW_TWIST, MUSCLE_COUNT};
+use crate::sim::expression::ExpressionWeights;
+use crate::sim::solver::solve_predicted;
+use crate::sim::{
+    solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, Workspace,
+};
+
+use super::observe::model_observer;
+
+/// `[inversion]` of a spec.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InversionParams {
+    /// Every this many video frames is inverted (images: all). Default 3.
+    pub frame_stride: usize,
+    /// Choe's penalty weight for `landmarks_sd`. Default 100.
+    pub penalty: f64,
+    /// Nonlinear corrections of `aus_refined`. Default 2.
+    pub refinements: usize,
+}
+
+impl Default for InversionParams {
+    fn default() -> Self {
+        InversionParams {
+            frame_stride: 3,
+            penalty: 100.0,
+            refinements: 2,
+        }
+    }
+}
+
+/// The methods, in table order.
+pub const METHODS: [&str; 6] = [
+    "network",
+    "network_normalized",
+    "landmarks_pg",
+    "landmarks_sd",
+    "aus_basis",
+    "aus_refined",
+];
+
+/// The optimization variables: the 52 muscles and the jaw rotation.
+fn variables() -> Vec<usize> {
+    (0..MUSCLE_COUNT).chain([JAW_ROTATION]).collect()
+}
+
+fn activations(x: &[f64]) -> Activations {
+    let mut v = [0.0; CONTROL_COUNT];
+    for (&c, &value) in variables().iter().zip(x) {
+        v[c] = value.clamp(0.0, 1.0);
+    }
+    v[JAW_SLIDE] = 0.5;
+    v[JAW_TWIST] = 0.5;
+    Activations::from_values(&v).expect("clamped")
+}
+
+fn flat(d: &[[f64; 3]; LANDMARK_COUNT]) -> Vec<f64> {
+    d.iter().flatten().copied().collect()
+}
+
+/// The base model, its basis and observer, and the landmark matrix M (one column per
+/// variable: the landmark displacements of its basis field, IOD units).
+pub struct Inverter<'a> {
+    pub model: &'a FaceModel,
+    pub basis: &'a LinearBasis,
+    pub observer: Observer,
+    pub columns: Vec<Vec<f64>>,
+}
+
+impl<'a> Inverter<'a> {
+    pub fn new(
+        model: &'a FaceModel,
+        basis: &'a LinearBasis,
+        calibration: &Calibration,
+    ) -> Result<Self> {
+        let observer = model_observer(model, calibration.clone())?;
+        let rest = landmarks(&basis.rest[..basis.vertex_count]);
+        let base = observer.displacements(&rest)?;
+        let mut columns = Vec::new();
+        for c in variables() {
+            let mut a = Activations::neutral();
+            a.set_index(c, 1.0)?;
+            let mut surface = Vec::new();
+            basis.evaluate(&a, &mut surface);
+            let d = observer.displacements(&landmarks(&surface))?;
+            columns.push(
+                flat(&d)
+                    .iter()
+                    .zip(flat(&base))
+                    .map(|(x, y)| x - y)
+                    .collect(),
+            );
+        }
+        Ok(Inverter {
+            model,
+            basis,
+            observer,
+            columns,
+        })
+    }
+
+    /// AUs of the basis face for variables `x`.
+    pub fn basis_aus(&self, x: &[f64], surface: &mut Vec<[f64; 3]>) -> Vec<f64> {
+        self.basis.evaluate(&activations(x), surface);
+        match self.observer.observe(&landmarks(surface)) {
+            Ok(o) => o.aus.to_vec(),
+            Err(_) => vec![f64::NAN; AU_COUNT],
+        }
+    }
+
+    /// The nonlinear face for `a` (from the basis prediction) and its AUs and landmark
+    /// displacements.
+    pub fn solve(
+        &self,
+        a: &Activations,
+        ws: &mut Workspace,
+        params: &SolveParams,
+    ) -> Result<([f64; AU_COUNT], Vec<f64>)> {
+        let (state, _) = solve_predicted(self.model, self.basis, a, ws, params)?;
+        let l = landmarks(state.surface(self.model.vertex_count()));
+        let o = self.observer.observe(&l)?;
+        Ok((o.aus, flat(&self.observer.displacements(&l)?)))
+    }
+
+    /// Landmark-space fit of displacements `d` (projected gradient).
+    pub fn landmarks_pg(&self, d: &[f64]) -> (Activations, usize) {
+        let qp = BoxQp::least_squares(&self.columns, d);
+        let s = projected_gradient(&qp, &vec![0.0; qp.n], 1e-6, 20_000);
+        (activations(&s.a), s.iterations)
+    }
+}
+
+/// One inverted frame: per method, the transferred AUs, the nonlinear face's landmark error
+/// (RMS over the 68 landmarks, IOD units), the optimizer's iterations and its time (s, the
+/// method alone; `solve_seconds` adds the nonlinear solve that scores it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scored {
+    pub aus: [f64; AU_COUNT],
+    pub landmark_rms: f64,
+    pub iterations: usize,
+    pub seconds: f64,
+    pub solve_seconds: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct InvertedFrame {
+    /// Index into the reference frames.
+    pub index: usize,
+    pub methods: Vec<Scored>,
+}
+
+fn rms(a: &[f64], b: &[f64]) -> f64 {
+    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / LANDMARK_COUNT as f64).sqrt()
+}
+
+/// Which reference frames are inverted: every image, every `stride`-th video frame.
+pub fn selected(reference: &[RefFrame], stride: usize) -> Vec<usize> {
+    (0..reference.len())
+        .filter(|&i| {
+            let f = &reference[i];
+            !f.cohort.is_video() || f.frame % stride.max(1) == 0
+        })
+        .collect()
+}
+
+/// Inverts the selected frames with every method.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    inverter: &Inverter,
+    base_mesh: &Mesh,
+    face: FaceParams,
+    weights: &ExpressionWeights,
+    cohort: &CohortParams,
+    calibration: &Calibration,
+    reference: &[RefFrame],
+    mlp: &Mlp,
+    training_aus: &[[f64; AU_COUNT]],
+    p: &InversionParams,
+    params: &SolveParams,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Vec<InvertedFrame>> {
+    let chosen = selected(reference, p.frame_stride);
+    // Normalization maps per cohort, over all of its frames (as Table 2).
+    let target = training_range(Normalization::MinMax, training_aus);
+    let maps: Vec<(CohortKind, crate::learn::Normalizer)> = CohortKind::ALL
+        .iter()
+        .map(|&k| {
+            let all: Vec<[f64; AU_COUNT]> = reference
+                .iter()
+                .filter(|f| f.cohort == k)
+                .map(|f| f.aus)
+                .collect();
+            (k, range_map(Normalization::MinMax, &all, &target))
+        })
+        .collect();
+    // One job per subject: its model solves its frames, the base model scores the methods.
+    let mut jobs: Vec<(CohortKind, usize, Vec<usize>)> = Vec::new();
+    for &i in &chosen {
+        let f = &reference[i];
+        match jobs.last_mut() {
+            Some((k, s, v)) if *k == f.cohort && *s == f.subject => v.push(i),
+            _ => jobs.push((f.cohort, f.subject, vec![i])),
+        }
+    }
+    let per_job: Vec<Vec<InvertedFrame>> = jobs
+        .par_iter()
+        .map(|(kind, s, frames)| -> Result<Vec<InvertedFrame>> {
+            let subject = Subject::draw(
+                base_mesh,
+                face,
+                weights,
+                &cohort.subjects,
+                cohort.seed,
+                kind.name(),
+                *s,
+            )?;
+            let subject_observer = model_observer(&subject.model, calibration.clone())?;
+            let mut sws = Workspace::new(&subject.model);
+            let mut ws = Workspace::new(inverter.model);
+            let mut surface = Vec::new();
+            let mut out = Vec::new();
+            for &i in frames {
+                let f = &reference[i];
+                let a = Activations::from_values(&f.activations)?;
+                let (state, _) = solve_from_rest(&subject.model, &a, &mut sws, params)
+                    .with_context(|| format!("inversion: reference frame {i}"))?;
+                let d = flat(
+                    &subject_observer
+                        .displacements(&landmarks(state.surface(subject.model.vertex_count())))?,
+                );
+                let r = f.aus;
+                let mut methods = Vec::new();
+                let score = |name: &str,
+                             a: &Activations,
+                             iterations: usize,
+                             seconds: f64,
+                             ws: &mut Workspace|
+                 -> Result<Scored> {
+                    let t = Instant::now();
+                    let (aus, disp) = inverter.solve(a, ws, params).with_context(|| {
+                        format!(
+                            "inversion: {} of reference frame {i} ({} subject {}, {:?} frame {})",
+                            name,
+                            f.cohort.name(),
+                            f.subject,
+                            f.expression,
+                            f.frame
+                        )
+                    })?;
+                    Ok(Scored {
+                        aus,
+                        landmark_rms: rms(&disp, &d),
+                        iterations,
+                        seconds,
+                        solve_seconds: t.elapsed().as_secs_f64(),
+                    })
+                };
+                // The network, both settings.
+                for map in [None, maps.iter().find(|m| m.0 == *kind).map(|m| &m.1)] {
+                    let t = Instant::now();
+                    let a = predict_activations(mlp, map, &[r])?.remove(0);
+                    let name = METHODS[methods.len()];
+                    methods.push(score(name, &a, 1, t.elapsed().as_secs_f64(), &mut ws)?);
+                }
+                // Landmark space.
+                let t = Instant::now();
+                let (a, it) = inverter.landmarks_pg(&d);
+                methods.push(score(
+                    "landmarks_pg",
+                    &a,
+                    it,
+                    t.elapsed().as_secs_f64(),
+                    &mut ws,
+                )?);
+                let t = Instant::now();
+                let qp = BoxQp::least_squares(&inverter.columns, &d);
+                let sd = penalty_descent(&qp, &vec![0.0; qp.n], p.penalty, 1e-6, 20_000);
+                methods.push(score(
+                    "landmarks_sd",
+                    &activations(&sd.a),
+                    sd.iterations,
+                    t.elapsed().as_secs_f64(),
+                    &mut ws,
+                )?);
+                // AU space through the basis, then corrected by the nonlinear face.
+                let t = Instant::now();
+                let start = vec![0.0; inverter.columns.len()];
+                let mut f = |x: &[f64]| inverter.basis_aus(x, &mut surface);
+                let fit = au_fit(&mut f, &r, &start, 1e-4, 1e-4, 30);
+                let basis_seconds = t.elapsed().as_secs_f64();
+                methods.push(score(
+                    "aus_basis",
+                    &activations(&fit.a),
+                    fit.iterations,
+                    basis_seconds,
+                    &mut ws,
+                )?);
+                // Defect correction, keeping the iterate whose nonlinear face is closest.
+                let t = Instant::now();
+                let mut x = fit.a.clone();
+                let mut iterations = fit.iterations;
+                let cost = |aus: &[f64; AU_COUNT]| -> f64 {
+                    aus.iter().zip(&r).map(|(a, b)| (a - b).powi(2)).sum()
+                };
+                let mut best: Option<(f64, Vec<f64>)> = None;
+                for step in 0..=p.refinements {
+                    // A correction can ask for activations the nonlinear face cannot reach
+                    // (the solve does not converge): keep the best iterate so far.
+                    let Ok((nl, _)) = inverter.solve(&activations(&x), &mut ws, params) else {
+                        break;
+                    };
+                    let c = cost(&nl);
+                    if best.as_ref().is_none_or(|b| c < b.0) {
+                        best = Some((c, x.clone()));
+                    }
+                    if step == p.refinements {
+                        break;
+                    }
+                    let bl = inverter.basis_aus(&x, &mut surface);
+                    let target: Vec<f64> = (0..AU_COUNT).map(|k| r[k] - (nl[k] - bl[k])).collect();
+                    let mut f = |x: &[f64]| inverter.basis_aus(x, &mut surface);
+                    let next = au_fit(&mut f, &target, &x, 1e-4, 1e-4, 30);
+                    iterations += next.iterations;
+                    x = next.a;
+                }
+                let x = best.map_or(fit.a.clone(), |b| b.1);
+                let seconds = basis_seconds + t.elapsed().as_secs_f64();
+                methods.push(score(
+                    "aus_refined",
+                    &activations(&x),
+                    iterations,
+                    seconds,
+                    &mut ws,
+                )?);
+                out.push(InvertedFrame { index: i, methods });
+                tick();
+            }
+            Ok(out)
+        })
+        .collect::<Result<_>>()?;
+    Ok(per_job.into_iter().flatten().collect())
+}
+
+/// Per cohort and method: AU MSE (mean over 17, AUs / 5), landmark RMS, iterations and
+/// milliseconds per frame (method alone, and with the scoring solve).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Summary {
+    pub cohort: CohortKind,
+    pub method: &'static str,
+    pub frames: usize,
+    pub au_mse: f64,
+    pub landmark_rms: f64,
+    pub iterations: f64,
+    pub ms: f64,
+    pub ms_with_solve: f64,
+}
+
+pub fn summarize(reference: &[RefFrame], frames: &[InvertedFrame]) -> Vec<Summary> {
+    let mut out = Vec::new();
+    for kind in CohortKind::ALL {
+        let mine: Vec<&InvertedFrame> = frames
+            .iter()
+            .filter(|f| reference[f.index].cohort == kind)
+            .collect();
+        if mine.is_empty() {
+            continue;
+        }
+        let n = mine.len() as f64;
+        for (m, &method) in METHODS.iter().enumerate() {
+            let mean =
+                |g: &dyn Fn(&InvertedFrame) -> f64| mine.iter().map(|f| g(f)).sum::<f64>() / n;
+            out.push(Summary {
+                cohort: kind,
+                method,
+                frames: mine.len(),
+                au_mse: mean(&|f| {
+                    let r = reference[f.index].aus;
+                    let t = f.methods[m].aus;
+                    (0..AU_COUNT)
+                        .map(|k| ((r[k] - t[k]) / AU_MAX).powi(2))
+                        .sum::<f64>()
+                        / AU_COUNT as f64
+                }),
+                landmark_rms: mean(&|f| f.methods[m].landmark_rms),
+                iterations: mean(&|f| f.methods[m].iterations as f64),
+                ms: mean(&|f| 1e3 * f.methods[m].seconds),
+                ms_with_solve: mean(&|f| 1e3 * (f.methods[m].seconds + f.methods[m].solve_seconds)),
+            });
+        }
+    }
+    out
+}
+
+/// The deterministic part: `cohort,method,frames,au_mse,landmark_rms,iterations`.
+pub fn csv(rows: &[Summary]) -> String {
+    let mut out = String::from("cohort,method,frames,au_mse,landmark_rms_iod,iterations\n");
+    for r in rows {
+        out.push_str(&format!(
+            "{},{},{},{:.6e},{:.6e},{:.2}\n",
+            r.cohort.name(),
+            r.method,
+            r.frames,
+            r.au_mse,
+            r.landmark_rms,
+            r.iterations
+        ));
+    }
+    out
+}
+
+/// Timings (vary from run to run): `cohort,method,ms_per_frame,ms_per_frame_with_solve`.
+pub fn timing_csv(rows: &[Summary]) -> String {
+    let mut out = String::from("cohort,method,ms_per_frame,ms_per_frame_with_solve\n");
+    for r in rows {
+        out.push_str(&format!(
+            "{},{},{:.4},{:.4}\n",
+            r.cohort.name(),
+            r.method,
+            r.ms,
+            r.ms_with_solve
+        ));
+    }
+    out
+}
+
+pub fn markdown(rows: &[Summary], p: &InversionParams, seed: u64) -> String {
+    let mut out = String::from("# Inversion: network vs optimization (Choe et al. 2001)\n\n");
+    out.push_str(&format!(
+        "Table 2's cohorts (every image, every {}th video frame), network of seed {seed}. Each \
+         method's activations drive the base model (nonlinear solve from the basis \
+         prediction); AU MSE is over 17 AUs of (reference - transferred) / 5, landmark RMS \
+         the distance of the solved face's 68 landmarks from the subject's (IOD units, head \
+         motion removed). Time per frame on one worker: the method alone, then with the solve \
+         that scores it. `landmarks_sd` is Choe's penalty (lambda = {}) with steepest \
+         descent; `aus_refined` adds {} nonlinear corrections.\n\n",
+        p.frame_stride, p.penalty, p.refinements
+    ));
+    out.push_str(
+        "| cohort | method | frames | AU MSE | landmark RMS (IOD) | iterations | ms / frame | ms / frame with solve |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        out.push_str(&format!(
+            "| {} | {} | {} | {:.4} | {:.4} | {:.1} | {:.3} | {:.1} |\n",
+            r.cohort.name().replace('_', " "),
+            r.method,
+            r.frames,
+            r.au_mse,
+            r.landmark_rms,
+            r.iterations,
+            r.ms,
+            r.ms_with_solve
+        ));
+    }
+    out
+}
+
+/// What the inversion stage leaves: the table's CSV, timings and Markdown.
+pub struct Output {
+    pub csv: String,
+    pub timing: String,
+    pub markdown: String,
+}
+
+const INVERSION_VERSION: u32 = 2;
+
+/// The cached inversion stage. Its key hashes `inversion.*` and the keys of the cohort, the
+/// first seed's unified network, the dataset (normalization range) and the basis.
+#[allow(clippy::too_many_arguments)]
+pub fn stage(
+    spec: &crate::spec::Spec,
+    source: &super::face::FaceSource,
+    cache: &crate::cache::Cache,
+    record: &mut dyn FnMut(&str, &str, bool, Instant),
+    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
+    inputs: &[&str],
+    inverter: &Inverter,
+    calibration: &Calibration,
+    reference: &[RefFrame],
+    mlp: &Mlp,
+    training_aus: &[[f64; AU_COUNT]],
+) -> Result<Output> {
+    let values: String = spec
+        .values
+        .iter()
+        .filter(|(k, _)| k.starts_with("inversion."))
+        .map(|(k, v)| format!("{k} = {v}\n"))
+        .collect();
+    let key = crate::cache::key("inversion", INVERSION_VERSION, &values, inputs);
+    let t = Instant::now();
+    let names = ["inversion.csv", "inversion_timing.csv", "inversion.md"];
+    if let Some(e) = cache.get("inversion", &key)? {
+        let mut text = names
+            .iter()
+            .map(|n| Ok(String::from_utf8(e.read(n)?)?))
+            .collect::<Result<Vec<_>>>()?
+            .into_iter();
+        record("inversion", &key, true, t);
+        return Ok(Output {
+            csv: text.next().expect("3"),
+            timing: text.next().expect("3"),
+            markdown: text.next().expect("3"),
+        });
+    }
+    let p = &spec.inversion;
+    let progress = bar(
+        selected(reference, p.frame_stride).len() as u64,
+        "inversion",
+    );
+    let tick = || progress.inc(1);
+    let params = SolveParams {
+        tolerance: spec.dataset.tolerance,
+        ..SolveParams::default()
+    };
+    let frames = run(
+        inverter,
+        &source.mesh()?,
+        source.params(),
+        &source.weights()?,
+        &spec.cohort,
+        calibration,
+        reference,
+        mlp,
+        training_aus,
+        p,
+        &params,
+        &tick,
+    )?;
+    progress.finish_and_clear();
+    let rows = summarize(reference, &frames);
+    let out = Output {
+        csv: csv(&rows),
+        timing: timing_csv(&rows),
+        markdown: markdown(&rows, p, spec.seeds[0]),
+    };
+    cache.put(
+        "inversion",
+        &key,
+        &[
+            (names[0].into(), out.csv.clone().into_bytes()),
+            (names[1].into(), out.timing.clone().into_bytes()),
+            (names[2].into(), out.markdown.clone().into_bytes()),
+        ],
+    )?;
+    record("inversion", &key, false, t);
+    Ok(out)
+}

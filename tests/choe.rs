@@ -1,0 +1,180 @@
+//! Choe et al. 2001 in facelab: landmark-space inversion over the linear basis, keyframe
+//! editing and retargeting from the command line.
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::sync::OnceLock;
+
+use facelab::experiments::inversion::Inverter;
+use facelab::invert::{penalty_descent, BoxQp};
+use facelab::io::calibration::{default_calibration_path, read_calibration};
+use facelab::observe::landmarks;
+use facelab::sim::basis::LinearBasis;
+use facelab::sim::controls::{JAW_ROTATION, MUSCLE_COUNT};
+use facelab::sim::{solve_from_rest, Activations, SolveParams, Workspace};
+
+fn basis() -> &'static LinearBasis {
+    static BASIS: OnceLock<LinearBasis> = OnceLock::new();
+    BASIS.get_or_init(|| LinearBasis::build(crate::model(), &SolveParams::default()).unwrap())
+}
+
+fn inverter() -> Inverter<'static> {
+    let calibration = read_calibration(&default_calibration_path())
+        .unwrap()
+        .calibration();
+    Inverter::new(crate::model(), basis(), &calibration).unwrap()
+}
+
+/// Joy at s = 0.7 with the jaw a little open: the variables (52 muscles, jaw rotation).
+fn known() -> (Activations, Vec<f64>) {
+    let weights = facelab::experiments::face::FaceSource::default()
+        .weights()
+        .unwrap();
+    let a = weights.sample(facelab::sim::expression::Expression::Joy, 0.7, 0.2);
+    let x = (0..MUSCLE_COUNT)
+        .chain([JAW_ROTATION])
+        .map(|c| a.get(c))
+        .collect();
+    (a, x)
+}
+
+#[test]
+fn landmark_inversion_recovers_the_models_own_activations() {
+    let inv = inverter();
+    let (a, truth) = known();
+    // The basis face's own displacements: exactly representable.
+    let d: Vec<f64> = (0..inv.columns[0].len())
+        .map(|i| inv.columns.iter().zip(&truth).map(|(c, t)| c[i] * t).sum())
+        .collect();
+    let (got, iterations) = inv.landmarks_pg(&d);
+    let x: Vec<f64> = (0..MUSCLE_COUNT)
+        .chain([JAW_ROTATION])
+        .map(|c| got.get(c))
+        .collect();
+    let qp = BoxQp::least_squares(&inv.columns, &d);
+    let rms = (qp.residual(&x) / 68.0).sqrt();
+    let worst = x
+        .iter()
+        .zip(&truth)
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0, f64::max);
+    println!("basis landmarks: {iterations} iterations, landmark RMS {rms:.2e} IOD, largest activation error {worst:.3}");
+    assert!(rms < 1e-4, "landmark RMS {rms}");
+    assert!(got.values().iter().all(|v| (0.0..=1.0).contains(v)));
+
+    // From the nonlinear face: the basis is an approximation, so the fit is too.
+    let mut ws = Workspace::new(crate::model());
+    let (state, _) = solve_from_rest(crate::model(), &a, &mut ws, &SolveParams::default()).unwrap();
+    let l = landmarks(state.surface(crate::model().vertex_count()));
+    let d: Vec<f64> = inv
+        .observer
+        .displacements(&l)
+        .unwrap()
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
+    let (got, _) = inv.landmarks_pg(&d);
+    let (_, solved) = inv.solve(&got, &mut ws, &SolveParams::default()).unwrap();
+    let rms = (solved
+        .iter()
+        .zip(&d)
+        .map(|(p, q)| (p - q).powi(2))
+        .sum::<f64>()
+        / 68.0)
+        .sqrt();
+    let mean_error = (0..MUSCLE_COUNT)
+        .chain([JAW_ROTATION])
+        .map(|c| (got.get(c) - a.get(c)).abs())
+        .sum::<f64>()
+        / (MUSCLE_COUNT + 1) as f64;
+    println!(
+        "nonlinear landmarks: landmark RMS {rms:.4} IOD, mean activation error {mean_error:.3}"
+    );
+    assert!(rms < 0.01, "landmark RMS {rms}");
+
+    // Choe's penalty formulation with steepest descent ends in the box too.
+    let qp = BoxQp::least_squares(&inv.columns, &d);
+    let sd = penalty_descent(&qp, &vec![0.0; qp.n], 100.0, 1e-6, 20_000);
+    assert!(sd.a.iter().all(|v| (0.0..=1.0).contains(v)));
+}
+
+fn facelab(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("run facelab")
+}
+
+#[test]
+fn edit_command_meets_keys_and_names_bad_ones() {
+    let dir = std::env::temp_dir().join(format!("facelab-edit-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("curves.csv");
+    let mut text = String::from("frame,zygomaticus_major_left,jaw_rotation\n");
+    for f in 0..60 {
+        let t = f as f64;
+        text.push_str(&format!(
+            "{f},{:.4},{:.4}\n",
+            0.4 + 0.2 * (0.5 * t).sin(),
+            0.1
+        ));
+    }
+    std::fs::write(&input, text).unwrap();
+    let out: PathBuf = dir.join("edited.csv");
+    let o = facelab(&[
+        "edit",
+        "--curves",
+        input.to_str().unwrap(),
+        "--key",
+        "20:zygomaticus_major_left=0.95",
+        "--knot-spacing",
+        "4",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let edited = std::fs::read_to_string(&out).unwrap();
+    let rows: Vec<Vec<f64>> = edited
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    let original: Vec<Vec<f64>> = std::fs::read_to_string(&input)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    assert!((rows[20][1] - 0.95).abs() < 1e-6, "{:?}", rows[20]);
+    for (f, (e, o)) in rows.iter().zip(&original).enumerate() {
+        assert!((e[2] - o[2]).abs() < 1e-9, "jaw changed at {f}");
+        if (f as f64 - 20.0).abs() >= 16.0 {
+            assert!((e[1] - o[1]).abs() < 1e-9, "frame {f} changed");
+        }
+    }
+
+    for (key, expect) in [
+        (
+            "20:zygomaticus_mayor_left=0.5",
+            "did you mean `zygomaticus_major_left`",
+        ),
+        ("20:zygomaticus_major_left=1.5", "outside [0, 1]"),
+        ("200:zygomaticus_major_left=0.5", "no such frame"),
+    ] {
+        let o = facelab(&[
+            "edit",
+            "--curves",
+            input.to_str().unwrap(),
+            "--key",
+            key,
+            "--out",
+            dir.join("bad.csv").to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(expect), "{key}: {err}");
+        assert!(!dir.join("bad.csv").exists());
+    }
+}
