@@ -2,7 +2,6 @@
 //! editing and retargeting from the command line.
 
 use std::path::PathBuf;
-use std::process::Command;
 use std::sync::OnceLock;
 
 use facelab::experiments::inversion::Inverter;
@@ -99,19 +98,11 @@ fn landmark_inversion_recovers_the_models_own_activations() {
     assert!(sd.a.iter().all(|v| (0.0..=1.0).contains(v)));
 }
 
-fn facelab(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_facelab"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run facelab")
-}
+use crate::facelab;
 
 #[test]
 fn edit_command_meets_keys_and_names_bad_ones() {
-    let dir = std::env::temp_dir().join(format!("facelab-edit-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = crate::temp("choe", "edit");
     let input = dir.join("curves.csv");
     let mut text = String::from("frame,zygomaticus_major_left,jaw_rotation\n");
     for f in 0..60 {

@@ -6,23 +6,10 @@ use std::process::{Command, Output};
 
 use facelab::spec::{self, SpecError};
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use crate::{facelab, root};
 
 fn temp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("facelab-harness-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn facelab(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_facelab"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("run facelab")
+    crate::temp("harness", name)
 }
 
 fn smoke() -> String {

@@ -2,7 +2,6 @@
 //! `facelab transfer` on OpenFace files (good and bad).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use facelab::cohort::{clips, CohortKind, CohortParams, Subject, SubjectParams};
 use facelab::experiments::face::FaceSource;
@@ -13,23 +12,10 @@ use facelab::learn::Mlp;
 use facelab::observe::AU_COUNT;
 use facelab::sim::{SolveParams, Workspace};
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use crate::{facelab, root};
 
 fn temp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("facelab-transfer-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn facelab(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_facelab"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("run facelab")
+    crate::temp("transfer", name)
 }
 
 /// The committed paper run (its unified network and training statistics).
