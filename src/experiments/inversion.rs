@@ -507,12 +507,7 @@ pub fn stage(
     mlp: &Mlp,
     training_aus: &[[f64; AU_COUNT]],
 ) -> Result<Output> {
-    let values: String = spec
-        .values
-        .iter()
-        .filter(|(k, _)| k.starts_with("inversion."))
-        .map(|(k, v)| format!("{k} = {v}\n"))
-        .collect();
+    let values = super::run::values_text(spec, &["inversion."]);
     let key = crate::cache::key("inversion", INVERSION_VERSION, &values, inputs);
     let t = Instant::now();
     let names = ["inversion.csv", "inversion_timing.csv", "inversion.md"];

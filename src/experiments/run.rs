@@ -74,7 +74,7 @@ pub struct RunSummary {
 }
 
 /// Values under the given dotted prefixes, as canonical `key = value` lines.
-fn values_text(spec: &Spec, prefixes: &[&str]) -> String {
+pub(super) fn values_text(spec: &Spec, prefixes: &[&str]) -> String {
     spec.values
         .iter()
         .filter(|(k, _)| prefixes.iter().any(|p| k.starts_with(p)))

@@ -72,13 +72,7 @@ pub fn run(
     bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
 ) -> Result<Table2Result> {
     let spec = inp.spec;
-    let values = |prefixes: &[&str]| -> String {
-        spec.values
-            .iter()
-            .filter(|(k, _)| prefixes.iter().any(|p| k.starts_with(p)))
-            .map(|(k, v)| format!("{k} = {v}\n"))
-            .collect()
-    };
+    let values = |prefixes: &[&str]| super::run::values_text(spec, prefixes);
     let params = SolveParams {
         tolerance: spec.dataset.tolerance,
         ..SolveParams::default()
