@@ -86,6 +86,51 @@ impl Rot3 {
         [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
     }
 
+    /// Rotation by the rotation vector `v` (axis times angle, radians): the exponential map.
+    pub fn exp(v: V3) -> Rot3 {
+        let angle = norm(v);
+        if angle < 1e-300 {
+            return Rot3::IDENTITY;
+        }
+        Rot3::about_axis(v, angle)
+    }
+
+    /// The rotation vector of `self` (the logarithm map), for angles below pi.
+    pub fn log(&self) -> V3 {
+        let m = &self.0;
+        let skew = [m[2][1] - m[1][2], m[0][2] - m[2][0], m[1][0] - m[0][1]];
+        let cos = ((m[0][0] + m[1][1] + m[2][2] - 1.0) * 0.5).clamp(-1.0, 1.0);
+        let sin = 0.5 * norm(skew);
+        let angle = sin.atan2(cos);
+        // angle / sin(angle), with its series near zero.
+        let factor = if angle < 1e-4 {
+            1.0 + angle * angle / 6.0
+        } else {
+            angle / sin
+        };
+        scale(skew, 0.5 * factor)
+    }
+
+    pub fn transpose(&self) -> Rot3 {
+        let m = &self.0;
+        Rot3([
+            [m[0][0], m[1][0], m[2][0]],
+            [m[0][1], m[1][1], m[2][1]],
+            [m[0][2], m[1][2], m[2][2]],
+        ])
+    }
+
+    /// `self^T v`.
+    #[inline]
+    pub fn apply_transpose(&self, v: V3) -> V3 {
+        let m = &self.0;
+        [
+            m[0][0] * v[0] + m[1][0] * v[1] + m[2][0] * v[2],
+            m[0][1] * v[0] + m[1][1] * v[1] + m[2][1] * v[2],
+            m[0][2] * v[0] + m[1][2] * v[1] + m[2][2] * v[2],
+        ]
+    }
+
     pub fn mul(&self, other: &Rot3) -> Rot3 {
         let mut out = [[0.0; 3]; 3];
         for (i, row) in out.iter_mut().enumerate() {
@@ -136,6 +181,16 @@ mod tests {
         let r = Rot3::about_axis([0.0, 0.0, 1.0], std::f64::consts::FRAC_PI_2);
         let v = r.apply([1.0, 0.0, 0.0]);
         assert!((v[0]).abs() < 1e-15 && (v[1] - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn log_inverts_exp() {
+        for v in [[0.3, -0.2, 0.1], [1e-7, 2e-7, -1e-7], [0.0, 2.5, 0.0]] {
+            let back = Rot3::exp(v).log();
+            for k in 0..3 {
+                assert!((back[k] - v[k]).abs() < 1e-12, "{v:?} -> {back:?}");
+            }
+        }
     }
 
     #[test]

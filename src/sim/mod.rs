@@ -10,6 +10,7 @@ pub mod geom;
 pub mod mesh;
 pub mod model;
 pub mod muscles;
+pub mod neck;
 pub mod rig;
 pub mod solver;
 pub mod tissue;

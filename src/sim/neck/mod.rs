@@ -1,0 +1,824 @@
+//! The head-neck system (paper 3.1, A.1-A.2, after Lee & Terzopoulos 2006): a 9-link
+//! cervical skeleton driven by 72 Hill-type muscles under two control layers.
+//!
+//! - `body`: links, discs, reduced-coordinate dynamics (eq. 1-2);
+//! - `muscles`: Hill muscles (eq. 3-4) and their layout;
+//! - here: the simulation step, the reflex layer (4 kHz, with the step), the voluntary layer's
+//!   interface (25 Hz) and the optimization that finds the activations holding a head pose at
+//!   equilibrium, which teaches the learned voluntary controller.
+//!
+//! The step is linearly implicit Euler: `(M + h D + h^2 K) du = h tau`, with D and K the
+//! damping and stiffness of the discs and muscles (including the reflex's), then
+//! `R_j <- R_j exp(h u_j)`. It is stable at 4 kHz for all gains used here and dissipates
+//! little: see the energy test.
+
+pub mod body;
+pub mod muscles;
+
+use faer::linalg::solvers::Solve;
+
+pub use body::{BodyState, Frames, HeadPose, Skeleton, SkeletonParams, DOF, JOINTS, SKULL};
+pub use muscles::{HillParams, Layer, Muscle, MUSCLES};
+
+use crate::invert::{projected_gradient, BoxQp};
+use crate::sim::geom::{Rot3, V3};
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum NeckError {
+    #[error("the neck simulation diverged at t = {time:.4} s (state not finite)")]
+    Diverged { time: f64 },
+    #[error("the neck's system matrix is not positive definite at t = {time:.4} s")]
+    Singular { time: f64 },
+    #[error("head pose of frame {frame} is not a number ({what})")]
+    NotANumber { frame: usize, what: String },
+    #[error("no equilibrium: {reason}")]
+    Equilibrium { reason: String },
+    #[error("no posture reaches head pose {pose:?} (degrees): {reason}")]
+    Posture { pose: V3, reason: String },
+}
+
+/// Reflex gains (paper 3.1): feedback activation `k_e (e - e*) + k_v (e_dot - e_dot*)` per
+/// muscle, e the strain.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReflexParams {
+    /// Activation per unit strain error. Default 20.
+    pub strain_gain: f64,
+    /// Activation per unit strain-rate error (s). Default 0.5.
+    pub rate_gain: f64,
+}
+
+impl Default for ReflexParams {
+    fn default() -> Self {
+        ReflexParams {
+            strain_gain: 20.0,
+            rate_gain: 0.5,
+        }
+    }
+}
+
+/// Everything that defines a neck.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NeckParams {
+    pub skeleton: SkeletonParams,
+    pub hill: HillParams,
+    pub reflex: ReflexParams,
+    /// Simulation (and reflex) rate, Hz. Default 4000 (paper 3.1).
+    pub simulation_rate: f64,
+    /// Voluntary controller rate, Hz. Default 25 (paper 3.1).
+    pub voluntary_rate: f64,
+    /// Disc and passive muscle damping on (off only to measure energy drift).
+    pub damping: bool,
+    /// Commanded head range (degrees, one direction) for pitch, yaw, roll: targets beyond it
+    /// are clamped. Default (40, 50, 30), inside the summed ranges of motion (68, 77, 61) so
+    /// that no joint is driven to its limit.
+    pub range_degrees: V3,
+    /// Ridge on the activations in the equilibrium fit (rad^2 per unit activation^2): among
+    /// the many activations that hold a pose, the one with least effort. Default 1e-4.
+    pub effort_weight: f64,
+    /// Weight (dimensionless) pulling the fitted posture toward the one that shares the
+    /// head's rotation among the joints by their ranges of motion. Default 0.1.
+    pub posture_weight: f64,
+    /// Voluntary planning: the most the setpoint pose moves per voluntary period (degrees).
+    /// Default 6 (150 deg/s).
+    pub max_step_degrees: f64,
+    /// Voluntary planning: velocity lead (s); the plan starts from `pose + lead * velocity`.
+    /// Default 0.1.
+    pub lead: f64,
+}
+
+impl Default for NeckParams {
+    fn default() -> Self {
+        NeckParams {
+            skeleton: SkeletonParams::default(),
+            hill: HillParams::default(),
+            reflex: ReflexParams::default(),
+            simulation_rate: 4000.0,
+            voluntary_rate: 25.0,
+            damping: true,
+            range_degrees: [40.0, 50.0, 30.0],
+            effort_weight: 1e-4,
+            posture_weight: 0.1,
+            max_step_degrees: 6.0,
+            lead: 0.1,
+        }
+    }
+}
+
+/// The voluntary layer's output for one period: feedforward activations and the setpoints
+/// (strain and strain rate) the reflex layer tracks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Command {
+    pub activation: Vec<f64>,
+    pub strain: Vec<f64>,
+    pub strain_rate: Vec<f64>,
+}
+
+impl Command {
+    /// No feedforward and no reflex: the muscles are passive.
+    pub fn passive() -> Command {
+        Command {
+            activation: vec![0.0; MUSCLES],
+            strain: vec![0.0; MUSCLES],
+            strain_rate: vec![0.0; MUSCLES],
+        }
+    }
+}
+
+/// What the voluntary controller sees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Observation {
+    pub pose: HeadPose,
+    /// Skull angular velocity in world axes (rad/s): x pitch, y yaw, z roll.
+    pub velocity: V3,
+}
+
+/// A voluntary (25 Hz) controller.
+pub trait Voluntary {
+    fn command(&mut self, neck: &Neck, seen: &Observation, target: HeadPose)
+        -> Result<Command, NeckError>;
+}
+
+/// The neck: skeleton, muscles and parameters.
+#[derive(Clone, Debug)]
+pub struct Neck {
+    pub params: NeckParams,
+    pub skeleton: Skeleton,
+    pub muscles: Vec<Muscle>,
+    /// Per joint and axis, the share of the head's rotation (each axis sums to 1 over the
+    /// joints): proportional to the range of motion.
+    pub shares: [V3; JOINTS],
+}
+
+/// Static generalized force (N m) below which a posture counts as an equilibrium.
+const EQUILIBRIUM_TOLERANCE: f64 = 1e-9;
+/// Skull orientation error (rad) at which the fit stops improving the head.
+const FIT_TOLERANCE: f64 = 1e-5;
+
+/// A static equilibrium of the neck under fixed activations.
+#[derive(Clone, Debug)]
+pub struct Equilibrium {
+    /// Joint angles (exponential coordinates, rad).
+    pub angles: [f64; DOF],
+    /// `K = -dG/dq` (row-major DOF x DOF), positive definite.
+    pub stiffness: Vec<f64>,
+    pub head: Rot3,
+    /// d log(R_head(q0)^T R_head(q)) / dq (row-major 3 x DOF).
+    pub head_jacobian: Vec<f64>,
+    pub muscles: MuscleState,
+    pub iterations: usize,
+}
+
+/// The activations that hold a head pose, and the strains there (the voluntary setpoints).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fit {
+    pub activation: Vec<f64>,
+    pub angles: [f64; DOF],
+    pub strain: Vec<f64>,
+    /// Skull orientation error left at the equilibrium (degrees).
+    pub error_degrees: f64,
+    pub iterations: usize,
+}
+
+/// One simulation step's report.
+#[derive(Clone, Debug)]
+pub struct StepReport {
+    /// Activations applied (feedforward plus reflex, clamped to [0, 1]).
+    pub activation: Vec<f64>,
+}
+
+/// Muscle state at an instant, for the reflex and for the equilibrium fit.
+#[derive(Clone, Debug)]
+pub struct MuscleState {
+    pub geometry: Vec<muscles::Geometry>,
+}
+
+impl Neck {
+    pub fn new(params: NeckParams) -> Neck {
+        let skeleton = Skeleton::new(&params.skeleton);
+        let rest = skeleton.frames(&BodyState::rest());
+        let muscles = muscles::layout(&rest);
+        let mut totals = [0.0; 3];
+        for rom in &body::RANGE_OF_MOTION_DEGREES {
+            for a in 0..3 {
+                totals[a] += rom[a];
+            }
+        }
+        let shares = body::RANGE_OF_MOTION_DEGREES.map(|rom| {
+            [rom[0] / totals[0], rom[1] / totals[1], rom[2] / totals[2]]
+        });
+        Neck {
+            params,
+            skeleton,
+            muscles,
+            shares,
+        }
+    }
+
+    pub fn time_step(&self) -> f64 {
+        1.0 / self.params.simulation_rate
+    }
+
+    /// Simulation steps per voluntary period.
+    pub fn steps_per_command(&self) -> usize {
+        (self.params.simulation_rate / self.params.voluntary_rate).round() as usize
+    }
+
+    pub fn head_pose(&self, f: &Frames) -> HeadPose {
+        HeadPose::of_rotation(&f.rotation[SKULL])
+    }
+
+    pub fn observe(&self, s: &BodyState) -> Observation {
+        let f = self.skeleton.frames(s);
+        Observation {
+            pose: self.head_pose(&f),
+            velocity: f.omega[SKULL],
+        }
+    }
+
+    /// Clamps a target into the commanded range; the message says what was clamped.
+    pub fn clamp_target(&self, target: HeadPose) -> (HeadPose, Option<String>) {
+        let d = target.degrees();
+        let r = self.params.range_degrees;
+        let clamped: V3 = std::array::from_fn(|k| d[k].clamp(-r[k], r[k]));
+        if clamped == d {
+            return (target, None);
+        }
+        let names = ["pitch", "yaw", "roll"];
+        let what: Vec<String> = (0..3)
+            .filter(|&k| clamped[k] != d[k])
+            .map(|k| format!("{} {:.1} -> {:.1} deg", names[k], d[k], clamped[k]))
+            .collect();
+        (
+            HeadPose::from_array(clamped.map(f64::to_radians)),
+            Some(format!(
+                "head pose outside the anatomical range (pitch +-{}, yaw +-{}, roll +-{} deg) clamped: {}",
+                r[0],
+                r[1],
+                r[2],
+                what.join(", ")
+            )),
+        )
+    }
+
+    /// Joint angles that put the head at `pose`, the rotation shared among the joints by
+    /// their ranges of motion (Newton on the three shared angles).
+    pub fn posture(&self, pose: HeadPose) -> Result<BodyState, NeckError> {
+        let target = pose.to_array();
+        let state_of = |phi: V3| {
+            let q: Vec<f64> = (0..DOF)
+                .map(|i| self.shares[i / 3][i % 3] * phi[i % 3])
+                .collect();
+            BodyState::from_angles(&q)
+        };
+        let pose_of = |phi: V3| {
+            let f = self.skeleton.frames(&state_of(phi));
+            self.head_pose(&f).to_array()
+        };
+        let mut phi = target;
+        for _ in 0..30 {
+            let now = pose_of(phi);
+            let r: V3 = std::array::from_fn(|k| target[k] - now[k]);
+            if r.iter().all(|v| v.abs() < 1e-12) {
+                return Ok(state_of(phi));
+            }
+            let h = 1e-7;
+            let mut jac = [[0.0; 3]; 3];
+            for c in 0..3 {
+                let mut p = phi;
+                p[c] += h;
+                let moved = pose_of(p);
+                for rr in 0..3 {
+                    jac[rr][c] = (moved[rr] - now[rr]) / h;
+                }
+            }
+            let step = solve3(&jac, r).ok_or_else(|| NeckError::Posture {
+                pose: pose.degrees(),
+                reason: "singular Jacobian".into(),
+            })?;
+            for k in 0..3 {
+                phi[k] += step[k];
+            }
+        }
+        Err(NeckError::Posture {
+            pose: pose.degrees(),
+            reason: "Newton did not converge in 30 iterations".into(),
+        })
+    }
+
+    pub fn muscle_state(&self, f: &Frames) -> MuscleState {
+        MuscleState {
+            geometry: self
+                .muscles
+                .iter()
+                .map(|m| muscles::geometry(&m.path, f))
+                .collect(),
+        }
+    }
+
+    pub fn strains(&self, ms: &MuscleState) -> Vec<f64> {
+        self.muscles
+            .iter()
+            .zip(&ms.geometry)
+            .map(|(m, g)| m.strain(g.length))
+            .collect()
+    }
+
+    /// The static generalized force (N m) at joint angles `q` (exponential coordinates)
+    /// under activations `a`: discs, gravity, passive and contractile muscle forces at rest
+    /// (eq. 1 with zero velocity). Also the skull's orientation and the muscle geometry.
+    fn static_force(&self, q: &[f64; DOF], a: &[f64]) -> ([f64; DOF], Rot3, MuscleState) {
+        let s = BodyState::from_angles(q);
+        let f = self.skeleton.frames(&s);
+        let c = self.skeleton.bias(&s, &f);
+        let disc = self.skeleton.disc_torque(&s, false);
+        let mut g: [f64; DOF] = std::array::from_fn(|i| disc[i] - c[i]);
+        let ms = self.muscle_state(&f);
+        let hill = &self.params.hill;
+        for ((m, geo), &ak) in self.muscles.iter().zip(&ms.geometry).zip(a) {
+            let tension =
+                m.passive(hill, geo.length, 0.0, false) + ak * m.force_length(hill, geo.length);
+            for i in 0..DOF {
+                g[i] -= tension * geo.gradient[i];
+            }
+        }
+        (g, f.rotation[SKULL], ms)
+    }
+
+    /// The posture at which activations `a` hold the neck still, by damped Newton from
+    /// `start` with the stiffness by forward differences. Errors if it does not converge or
+    /// the equilibrium is unstable.
+    pub fn equilibrium(&self, a: &[f64], start: &[f64; DOF]) -> Result<Equilibrium, NeckError> {
+        let mut q = *start;
+        let norm = |g: &[f64; DOF]| g.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let (mut g, _, _) = self.static_force(&q, a);
+        for iteration in 0..60 {
+            if norm(&g) < EQUILIBRIUM_TOLERANCE {
+                let (g, head, ms) = self.static_force(&q, a);
+                let reference = head.transpose();
+                let (stiffness, head_jacobian) = self.stiffness(&q, a, &g, Some(&reference));
+                if !positive_definite(&stiffness) {
+                    return Err(NeckError::Equilibrium {
+                        reason: "the equilibrium is unstable (stiffness not positive definite)"
+                            .into(),
+                    });
+                }
+                return Ok(Equilibrium {
+                    angles: q,
+                    stiffness,
+                    head,
+                    head_jacobian,
+                    muscles: ms,
+                    iterations: iteration,
+                });
+            }
+            let (stiffness, _) = self.stiffness(&q, a, &g, None);
+            let step = solve_dense(&stiffness, DOF, &g, 1).ok_or_else(|| NeckError::Equilibrium {
+                reason: "singular stiffness".into(),
+            })?;
+            let longest = step.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let mut t = (0.2 / longest.max(1e-300)).min(1.0);
+            let before = norm(&g);
+            loop {
+                let trial: [f64; DOF] = std::array::from_fn(|i| q[i] + t * step[i]);
+                let (gt, _, _) = self.static_force(&trial, a);
+                if norm(&gt) < before || t < 1e-6 {
+                    q = trial;
+                    g = gt;
+                    break;
+                }
+                t *= 0.5;
+            }
+        }
+        Err(NeckError::Equilibrium {
+            reason: format!("Newton did not converge (residual {:.2e} N m)", norm(&g)),
+        })
+    }
+
+    /// `K = -dG/dq` (row-major) by forward differences at `q` where the force is `g`, and
+    /// with `reference` the Jacobian of `log(reference R_skull)` (3 x DOF, row-major).
+    fn stiffness(
+        &self,
+        q: &[f64; DOF],
+        a: &[f64],
+        g: &[f64; DOF],
+        reference: Option<&Rot3>,
+    ) -> (Vec<f64>, Vec<f64>) {
+        const H: f64 = 1e-7;
+        let mut k = vec![0.0; DOF * DOF];
+        let mut jh = vec![0.0; 3 * DOF];
+        let base = reference.map(|r| {
+            let (_, head, _) = self.static_force(q, a);
+            r.mul(&head).log()
+        });
+        for c in 0..DOF {
+            let mut p = *q;
+            p[c] += H;
+            let (gp, head, _) = self.static_force(&p, a);
+            for r in 0..DOF {
+                k[r * DOF + c] = -(gp[r] - g[r]) / H;
+            }
+            if let (Some(r), Some(e0)) = (reference, base) {
+                let e = r.mul(&head).log();
+                for row in 0..3 {
+                    jh[row * DOF + c] = (e[row] - e0[row]) / H;
+                }
+            }
+        }
+        (k, jh)
+    }
+
+    /// The activations that hold the head at `target` at a stable equilibrium, found by
+    /// Gauss-Newton on `|e_head|^2 + w_p |q - q_shared|^2 + lambda |a|^2` over a in [0, 1]^72
+    /// (each step a box QP), where the equilibrium posture q(a) and its sensitivity
+    /// `dq/da = K^-1 dG/da` come from `equilibrium`, `e_head` is the skull's orientation error
+    /// and `q_shared` the posture sharing the rotation by range of motion (`posture`).
+    /// Many activations hold a pose; the ridge picks the least effort.
+    pub fn fit(&self, target: HeadPose, warm: Option<&Fit>) -> Result<Fit, NeckError> {
+        let prior = self.posture(target)?.angles();
+        let w_p = self.params.posture_weight;
+        let lambda = self.params.effort_weight;
+        let goal = target.rotation().transpose();
+        let mut a = warm.map_or(vec![0.0; MUSCLES], |w| w.activation.clone());
+        let start = warm.map_or(prior, |w| w.angles);
+        let mut eq = self.equilibrium(&a, &start)?;
+        let residual = |eq: &Equilibrium| -> Vec<f64> {
+            let mut r = goal.mul(&eq.head).log().to_vec();
+            r.extend((0..DOF).map(|i| w_p * (eq.angles[i] - prior[i])));
+            r
+        };
+        let objective = |r: &[f64], a: &[f64]| {
+            r.iter().map(|v| v * v).sum::<f64>() + lambda * a.iter().map(|v| v * v).sum::<f64>()
+        };
+        let mut r = residual(&eq);
+        let mut iterations = 0;
+        while iterations < 40 {
+            iterations += 1;
+            // dG/da_k = -F_l,k dl_k/dq; dq/da = K^-1 dG/da.
+            let hill = &self.params.hill;
+            let mut ga = vec![0.0; DOF * MUSCLES];
+            for (k, (m, geo)) in self.muscles.iter().zip(&eq.muscles.geometry).enumerate() {
+                let fl = m.force_length(hill, geo.length);
+                for i in 0..DOF {
+                    ga[i * MUSCLES + k] = -fl * geo.gradient[i];
+                }
+            }
+            let dq = solve_dense(&eq.stiffness, DOF, &ga, MUSCLES).ok_or_else(|| {
+                NeckError::Equilibrium {
+                    reason: "singular stiffness".into(),
+                }
+            })?;
+            let columns: Vec<Vec<f64>> = (0..MUSCLES)
+                .map(|k| {
+                    let mut col: Vec<f64> = (0..3)
+                        .map(|row| {
+                            (0..DOF)
+                                .map(|i| eq.head_jacobian[row * DOF + i] * dq[i * MUSCLES + k])
+                                .sum()
+                        })
+                        .collect();
+                    col.extend((0..DOF).map(|i| w_p * dq[i * MUSCLES + k]));
+                    col
+                })
+                .collect();
+            // Linearized residual r + J (a' - a) = J a' - d with d = J a - r.
+            let d: Vec<f64> = (0..r.len())
+                .map(|row| {
+                    columns.iter().zip(&a).map(|(c, ak)| c[row] * ak).sum::<f64>() - r[row]
+                })
+                .collect();
+            let mut qp = BoxQp::least_squares(&columns, &d);
+            for i in 0..qp.n {
+                qp.h[i * qp.n + i] += lambda;
+            }
+            let proposal = projected_gradient(&qp, &a, 1e-9, 5000).a;
+            let before = objective(&r, &a);
+            let mut t = 1.0;
+            let mut accepted = false;
+            while t > 1e-3 {
+                let trial: Vec<f64> = a.iter().zip(&proposal).map(|(x, p)| x + t * (p - x)).collect();
+                if let Ok(next) = self.equilibrium(&trial, &eq.angles) {
+                    let rn = residual(&next);
+                    if objective(&rn, &trial) < before {
+                        a = trial;
+                        eq = next;
+                        r = rn;
+                        accepted = true;
+                        break;
+                    }
+                }
+                t *= 0.5;
+            }
+            let error = r[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
+            if !accepted || (error < FIT_TOLERANCE && t == 1.0 && before - objective(&r, &a) < 1e-12) {
+                break;
+            }
+        }
+        let error = r[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
+        let strain = self.strains(&eq.muscles);
+        Ok(Fit {
+            activation: a,
+            angles: eq.angles,
+            strain,
+            error_degrees: error.to_degrees(),
+            iterations,
+        })
+    }
+
+    /// One step of `h = 1 / simulation_rate` under `command`, with the reflex adding
+    /// `k_e (e - e*) + k_v (e_dot - e_dot*)` when `reflex` is on.
+    pub fn step(
+        &self,
+        s: &mut BodyState,
+        command: &Command,
+        reflex: bool,
+        time: f64,
+    ) -> Result<StepReport, NeckError> {
+        let h = self.time_step();
+        let hill = &self.params.hill;
+        let damping = self.params.damping;
+        let f = self.skeleton.frames(s);
+        let mut system = self.skeleton.mass_matrix(&f);
+        let bias = self.skeleton.bias(s, &f);
+        let disc = self.skeleton.disc_torque(s, damping);
+        let mut tau: Vec<f64> = (0..DOF).map(|i| disc[i] - bias[i]).collect();
+        for (j, d) in self.skeleton.discs.iter().enumerate() {
+            for a in 0..3 {
+                let i = 3 * j + a;
+                let damp = if damping { d.damping[a] } else { 0.0 };
+                let q = s.rotations[j].log()[a];
+                system[i * DOF + i] += h * damp + h * h * d.tangent(a, q);
+            }
+        }
+        let (k_e, k_v) = (
+            self.params.reflex.strain_gain,
+            self.params.reflex.rate_gain,
+        );
+        let mut applied = Vec::with_capacity(MUSCLES);
+        for (k, m) in self.muscles.iter().enumerate() {
+            let g = muscles::geometry(&m.path, &f);
+            let l0 = m.rest_length;
+            let mut a = command.activation[k];
+            let (mut da_dl, mut da_dv) = (0.0, 0.0);
+            if reflex {
+                let e = m.strain(g.length);
+                let e_dot = g.rate / l0;
+                a += k_e * (e - command.strain[k]) + k_v * (e_dot - command.strain_rate[k]);
+                da_dl = k_e / l0;
+                da_dv = k_v / l0;
+            }
+            if !(0.0..=1.0).contains(&a) {
+                a = a.clamp(0.0, 1.0);
+                da_dl = 0.0;
+                da_dv = 0.0;
+            }
+            let force = m.force(hill, a, g.length, g.rate, damping);
+            let total = force.passive + a * force.contractile;
+            let stiffness = force.stiffness + force.contractile * da_dl;
+            let damping_d = force.damping + force.contractile * da_dv;
+            let weight = h * damping_d + h * h * stiffness;
+            let nz: Vec<usize> = (0..DOF).filter(|&i| g.gradient[i] != 0.0).collect();
+            for &r in &nz {
+                tau[r] -= total * g.gradient[r];
+                if weight != 0.0 {
+                    let wr = weight * g.gradient[r];
+                    for &c in &nz {
+                        system[r * DOF + c] += wr * g.gradient[c];
+                    }
+                }
+            }
+            applied.push(a);
+        }
+        let a = faer::Mat::<f64>::from_fn(DOF, DOF, |r, c| system[r * DOF + c]);
+        let llt = a
+            .llt(faer::Side::Lower)
+            .map_err(|_| NeckError::Singular { time })?;
+        let mut rhs = faer::Mat::<f64>::from_fn(DOF, 1, |r, _| h * tau[r]);
+        llt.solve_in_place(rhs.as_mut());
+        for i in 0..DOF {
+            s.velocity[i] += rhs[(i, 0)];
+        }
+        if s.velocity.iter().any(|v| !v.is_finite()) {
+            return Err(NeckError::Diverged { time });
+        }
+        for j in 0..JOINTS {
+            let u = [s.velocity[3 * j], s.velocity[3 * j + 1], s.velocity[3 * j + 2]];
+            s.rotations[j] = s.rotations[j].mul(&Rot3::exp(u.map(|v| v * h)));
+        }
+        Ok(StepReport {
+            activation: applied,
+        })
+    }
+
+    /// Total mechanical energy (J): kinetic, gravity, discs and passive muscle springs.
+    pub fn energy(&self, s: &BodyState) -> f64 {
+        let f = self.skeleton.frames(s);
+        let muscles: f64 = self
+            .muscles
+            .iter()
+            .map(|m| m.passive_energy(&self.params.hill, muscles::geometry(&m.path, &f).length))
+            .sum();
+        self.skeleton.energy(s, &f) + muscles
+    }
+}
+
+/// The teacher voluntary controller: plans the next setpoint pose toward the target and
+/// finds, by optimization, the activations that hold it (`Neck::hold`) and the strains it
+/// implies. Slow (a box QP per period) but exact; the learned controller imitates it.
+#[derive(Clone, Debug, Default)]
+pub struct Planner {
+    warm: Option<Vec<f64>>,
+}
+
+impl Planner {
+    /// The setpoint pose for the next period.
+    pub fn next_pose(params: &NeckParams, seen: &Observation, target: HeadPose) -> HeadPose {
+        let now = seen.pose.to_array();
+        let t = target.to_array();
+        let lead: V3 = std::array::from_fn(|k| now[k] + params.lead * seen.velocity[k]);
+        let mut step: V3 = std::array::from_fn(|k| t[k] - lead[k]);
+        let n = step.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let max = params.max_step_degrees.to_radians();
+        if n > max {
+            step = step.map(|v| v * max / n);
+        }
+        HeadPose::from_array(std::array::from_fn(|k| now[k] + step[k]))
+    }
+
+    /// The command that holds `next` and moves the strains there within one period from
+    /// those of the current pose.
+    pub fn command_for(
+        &mut self,
+        neck: &Neck,
+        now: HeadPose,
+        next: HeadPose,
+    ) -> Result<Command, NeckError> {
+        let posture = neck.posture(next)?;
+        let (activation, _) = neck.hold(&posture, self.warm.as_deref());
+        self.warm = Some(activation.clone());
+        let strain = neck.strains(&neck.muscle_state(&neck.skeleton.frames(&posture)));
+        let here = neck.posture(now)?;
+        let strain_now = neck.strains(&neck.muscle_state(&neck.skeleton.frames(&here)));
+        let rate = neck.params.voluntary_rate;
+        let strain_rate = strain
+            .iter()
+            .zip(&strain_now)
+            .map(|(e, e0)| (e - e0) * rate)
+            .collect();
+        Ok(Command {
+            activation,
+            strain,
+            strain_rate,
+        })
+    }
+}
+
+impl Voluntary for Planner {
+    fn command(
+        &mut self,
+        neck: &Neck,
+        seen: &Observation,
+        target: HeadPose,
+    ) -> Result<Command, NeckError> {
+        let next = Planner::next_pose(&neck.params, seen, target);
+        self.command_for(neck, seen.pose, next)
+    }
+}
+
+/// A simulated run: the head pose sampled at `sample_rate`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectory {
+    pub time: Vec<f64>,
+    pub target: Vec<HeadPose>,
+    pub pose: Vec<HeadPose>,
+    /// Mean applied activation over the muscles at each sample.
+    pub effort: Vec<f64>,
+    pub final_state: BodyState,
+}
+
+/// Simulates `duration` seconds from `start`, the voluntary controller called every
+/// `1 / voluntary_rate` s with `target(t)`, the reflex every step; samples every `every`
+/// steps.
+pub fn simulate(
+    neck: &Neck,
+    controller: &mut dyn Voluntary,
+    target: &dyn Fn(f64) -> HeadPose,
+    start: BodyState,
+    duration: f64,
+    every: usize,
+) -> Result<Trajectory, NeckError> {
+    let h = neck.time_step();
+    let steps = (duration / h).round() as usize;
+    let per_command = neck.steps_per_command();
+    let mut s = start;
+    let mut out = Trajectory {
+        time: Vec::new(),
+        target: Vec::new(),
+        pose: Vec::new(),
+        effort: Vec::new(),
+        final_state: BodyState::rest(),
+    };
+    let mut command = Command::passive();
+    for n in 0..steps {
+        let t = n as f64 * h;
+        if n % per_command == 0 {
+            let seen = neck.observe(&s);
+            command = controller.command(neck, &seen, target(t))?;
+        }
+        let report = neck.step(&mut s, &command, true, t)?;
+        if (n + 1) % every == 0 {
+            let seen = neck.observe(&s);
+            out.time.push(t + h);
+            out.target.push(target(t + h));
+            out.pose.push(seen.pose);
+            out.effort
+                .push(report.activation.iter().sum::<f64>() / MUSCLES as f64);
+        }
+    }
+    out.final_state = s;
+    Ok(out)
+}
+
+/// Solves `A X = B` for `A` n x n and `B` n x m, both row-major (LU with partial pivoting).
+fn solve_dense(a: &[f64], n: usize, b: &[f64], m: usize) -> Option<Vec<f64>> {
+    let mat = faer::Mat::<f64>::from_fn(n, n, |r, c| a[r * n + c]);
+    let lu = mat.partial_piv_lu();
+    let mut rhs = faer::Mat::<f64>::from_fn(n, m, |r, c| b[r * m + c]);
+    lu.solve_in_place(rhs.as_mut());
+    let out: Vec<f64> = (0..n * m).map(|i| rhs[(i / m, i % m)]).collect();
+    out.iter().all(|v| v.is_finite()).then_some(out)
+}
+
+/// Whether the symmetric part of `k` (row-major DOF x DOF) is positive definite.
+fn positive_definite(k: &[f64]) -> bool {
+    let sym = faer::Mat::<f64>::from_fn(DOF, DOF, |r, c| 0.5 * (k[r * DOF + c] + k[c * DOF + r]));
+    sym.llt(faer::Side::Lower).is_ok()
+}
+
+fn solve3(m: &[[f64; 3]; 3], b: V3) -> Option<V3> {
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    if det.abs() < 1e-300 {
+        return None;
+    }
+    let col = |c: usize| -> f64 {
+        let mut mm = *m;
+        for r in 0..3 {
+            mm[r][c] = b[r];
+        }
+        mm[0][0] * (mm[1][1] * mm[2][2] - mm[1][2] * mm[2][1])
+            - mm[0][1] * (mm[1][0] * mm[2][2] - mm[1][2] * mm[2][0])
+            + mm[0][2] * (mm[1][0] * mm[2][1] - mm[1][1] * mm[2][0])
+    };
+    Some([col(0) / det, col(1) / det, col(2) / det])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    #[ignore]
+    fn explore() {
+        let neck = Neck::new(NeckParams::default());
+        for m in &neck.muscles {
+            println!("{} l0 {:.4}", m.name, m.rest_length);
+        }
+        // Passive sag.
+        let mut s = BodyState::rest();
+        let t0 = std::time::Instant::now();
+        for n in 0..8000 {
+            neck.step(&mut s, &Command::passive(), false, n as f64 / 4000.0).unwrap();
+        }
+        println!("8000 steps {:?}", t0.elapsed());
+        let q = s.angles();
+        println!("sag pose {:?}", neck.observe(&s).pose.degrees());
+        for j in 0..JOINTS {
+            println!("joint {j} {:?} range {:?}", [q[3*j], q[3*j+1], q[3*j+2]].map(f64::to_degrees), body::RANGE_OF_MOTION_DEGREES[j]);
+        }
+        // Energy drift, damping off.
+        let neck2 = Neck::new(NeckParams { damping: false, ..NeckParams::default() });
+        let mut s = BodyState::rest();
+        let e0 = neck2.energy(&s);
+        let mut lo = e0; let mut hi = e0;
+        for n in 0..4000 {
+            neck2.step(&mut s, &Command::passive(), false, n as f64 / 4000.0).unwrap();
+            let e = neck2.energy(&s);
+            lo = lo.min(e); hi = hi.max(e);
+        }
+        println!("energy start {e0} end {} range {lo}..{hi} pose {:?}", neck2.energy(&s), neck2.observe(&s).pose.degrees());
+        // Planner tracking.
+        for target in [HeadPose::default(), HeadPose::from_degrees(0.0, 40.0, 0.0), HeadPose::from_degrees(30.0, 0.0, 0.0), HeadPose::from_degrees(-30.0, 0.0, 20.0)] {
+            let posture = neck.posture(target).unwrap();
+            let (a, res) = neck.hold(&posture, None);
+            println!("target {:?} hold residual {res:.4} mean a {:.3}", target.degrees(), a.iter().sum::<f64>() / 72.0);
+            let mut planner = Planner::default();
+            let t0 = std::time::Instant::now();
+            let tr = simulate(&neck, &mut planner, &|_| target, BodyState::rest(), 2.0, 400).unwrap();
+            println!("  took {:?}", t0.elapsed());
+            for (t, p) in tr.time.iter().zip(&tr.pose) {
+                println!("  t {t:.2} pose {:?}", p.degrees());
+            }
+        }
+    }
+}
