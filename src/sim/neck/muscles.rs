@@ -254,7 +254,6 @@ const T1_TRANSVERSE: V3 = [0.03, 0.0, -0.01];
 const T2_TRANSVERSE: V3 = [0.03, -0.022, -0.015];
 const T3_TRANSVERSE: V3 = [0.03, -0.044, -0.02];
 const T3_SPINOUS: V3 = [0.004, -0.05, -0.065];
-const T1_SPINOUS: V3 = [0.004, -0.005, -0.055];
 const T3_BODY: V3 = [0.008, -0.044, 0.015];
 
 // Skull, relative to the occipital condyles.
