@@ -19,6 +19,35 @@ pub struct HeadPose {
 }
 
 impl HeadPose {
+    pub fn from_degrees(pitch: f64, yaw: f64, roll: f64) -> HeadPose {
+        HeadPose::from_array([pitch, yaw, roll].map(f64::to_radians))
+    }
+
+    /// `[pitch, yaw, roll]` (rad).
+    pub fn to_array(self) -> V3 {
+        [self.pitch, self.yaw, self.roll]
+    }
+
+    pub fn from_array(a: V3) -> HeadPose {
+        HeadPose {
+            pitch: a[0],
+            yaw: a[1],
+            roll: a[2],
+        }
+    }
+
+    /// `[pitch, yaw, roll]` (degrees).
+    pub fn degrees(self) -> V3 {
+        self.to_array().map(f64::to_degrees)
+    }
+
+    /// The angle (degrees) of the rotation between two poses.
+    pub fn error_degrees(self, other: HeadPose) -> f64 {
+        let r = self.rotation().transpose().mul(&other.rotation());
+        let v = r.log();
+        (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().to_degrees()
+    }
+
     /// The pose of a head turned by `r` (model frame) from the frontal neutral face.
     pub fn from_rotation(r: &Rot3) -> HeadPose {
         let m = r.0;

@@ -475,86 +475,9 @@ impl Skeleton {
     }
 }
 
-/// Head orientation as (pitch, yaw, roll) in radians with `R = Rx(pitch) Ry(yaw) Rz(roll)`:
-/// pitch > 0 looks down, yaw > 0 turns to the subject's left, roll > 0 tilts the crown to the
-/// subject's right. This is OpenFace's `pose_Rx, pose_Ry, pose_Rz` order, moved from its
-/// camera frame (x right, y down, z away from the camera) into ours by a half turn about x,
-/// which maps `(Rx, Ry, Rz)` to `(Rx, -Ry, -Rz)`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct HeadPose {
-    pub pitch: f64,
-    pub yaw: f64,
-    pub roll: f64,
-}
-
-impl HeadPose {
-    pub fn from_degrees(pitch: f64, yaw: f64, roll: f64) -> HeadPose {
-        HeadPose {
-            pitch: pitch.to_radians(),
-            yaw: yaw.to_radians(),
-            roll: roll.to_radians(),
-        }
-    }
-
-    /// From OpenFace's `pose_Rx, pose_Ry, pose_Rz` (radians, camera frame).
-    pub fn from_openface(rx: f64, ry: f64, rz: f64) -> HeadPose {
-        HeadPose {
-            pitch: rx,
-            yaw: -ry,
-            roll: -rz,
-        }
-    }
-
-    pub fn to_array(self) -> V3 {
-        [self.pitch, self.yaw, self.roll]
-    }
-
-    pub fn from_array(a: V3) -> HeadPose {
-        HeadPose {
-            pitch: a[0],
-            yaw: a[1],
-            roll: a[2],
-        }
-    }
-
-    pub fn degrees(self) -> V3 {
-        self.to_array().map(f64::to_degrees)
-    }
-
-    pub fn rotation(self) -> Rot3 {
-        let rx = Rot3::about_axis([1.0, 0.0, 0.0], self.pitch);
-        let ry = Rot3::about_axis([0.0, 1.0, 0.0], self.yaw);
-        let rz = Rot3::about_axis([0.0, 0.0, 1.0], self.roll);
-        rx.mul(&ry).mul(&rz)
-    }
-
-    pub fn of_rotation(r: &Rot3) -> HeadPose {
-        let m = &r.0;
-        HeadPose {
-            pitch: (-m[1][2]).atan2(m[2][2]),
-            yaw: m[0][2].clamp(-1.0, 1.0).asin(),
-            roll: (-m[0][1]).atan2(m[0][0]),
-        }
-    }
-
-    /// The largest per-axis difference in degrees.
-    pub fn error_degrees(self, other: HeadPose) -> f64 {
-        let a = self.degrees();
-        let b = other.degrees();
-        (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0, f64::max)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn head_pose_round_trips_through_its_rotation() {
-        let p = HeadPose::from_degrees(20.0, -35.0, 12.0);
-        let back = HeadPose::of_rotation(&p.rotation());
-        assert!(p.error_degrees(back) < 1e-10, "{back:?}");
-    }
 
     #[test]
     fn mass_matrix_is_symmetric_positive_definite_and_matches_kinetic_energy() {
