@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use anyhow::Context;
-use facelab::experiments::bench::{bench_observe, bench_solve, bench_train, bench_transfer};
+use facelab::experiments::bench::{bench_neck, bench_observe, bench_solve, bench_train, bench_transfer};
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
 use facelab::experiments::observe;
 use facelab::experiments::run;
@@ -275,6 +275,13 @@ enum Bench {
         #[arg(long, default_value_t = 4)]
         clips: usize,
     },
+    /// Neck speed on one core: 1 s at 4 kHz with reflex and learned voluntary control
+    /// (`neck.realtime_factor`), the step, the network and the teacher's fit.
+    Neck {
+        /// Simulated seconds
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f64,
+    },
     /// Observer speed: one face (landmarks + AUs), and reading a large OpenFace file.
     Observe {
         /// Frames of the generated OpenFace file (714 columns)
@@ -481,6 +488,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Bench::Transfer { model, clips } => {
                 set_threads(Some(1))?;
                 bench_transfer(&model, clips, &mut std::io::stdout().lock())?
+            }
+            Bench::Neck { seconds } => {
+                set_threads(Some(1))?;
+                bench_neck(seconds, &mut std::io::stdout().lock())?
             }
             Bench::Observe { frames } => bench_observe(frames, &mut std::io::stdout().lock())?,
             Bench::Solve {

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod dataset;
 pub mod editing;
 pub mod face;
+pub mod headpose;
 pub mod inversion;
 pub mod observe;
 pub mod run;

@@ -21,6 +21,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::dataset::{self, Sample, SolveStart};
 use super::face::FaceSource;
+use super::headpose;
 use super::inversion;
 use super::observe::model_observer;
 use super::table1::{self, Network, Row};
@@ -232,7 +233,7 @@ fn basis_from(bytes: &[u8]) -> Result<LinearBasis> {
     })
 }
 
-fn curves_csv(curves: &Curves) -> String {
+pub(super) fn curves_csv(curves: &Curves) -> String {
     let mut out = String::from("epoch,train_mse,test_mse\n");
     for (i, (a, b)) in curves.train.iter().zip(&curves.test).enumerate() {
         out.push_str(&format!("{},{a},{b}\n", i + 1));
@@ -240,7 +241,7 @@ fn curves_csv(curves: &Curves) -> String {
     out
 }
 
-fn curves_from(text: &str) -> Curves {
+pub(super) fn curves_from(text: &str) -> Curves {
     let mut c = Curves::default();
     for line in text.lines().skip(1) {
         let cells: Vec<f64> = line.split(',').filter_map(|s| s.parse().ok()).collect();
@@ -726,6 +727,62 @@ fn point_latest(experiment_dir: &Path, run: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The head-neck experiment of one cell: CSVs into the run folder (through `write`), the
+/// paper table and figures when the spec is a single cell.
+fn headpose_outputs(
+    cell: &Cell,
+    prefix: &str,
+    single: bool,
+    out_root: &Path,
+    cache: &Cache,
+    records: &mut Vec<StageRecord>,
+    write: &mut dyn FnMut(String, Vec<u8>) -> Result<()>,
+) -> Result<()> {
+    let spec = &cell.spec;
+    let mut record = |stage: &str, key: &str, hit: bool, t: Instant| {
+        records.push(StageRecord {
+            cell: cell.name.clone(),
+            stage: stage.into(),
+            key: key.into(),
+            hit,
+            seconds: t.elapsed().as_secs_f64(),
+        })
+    };
+    let out = headpose::stage(spec, cache, &mut record, &bar)?;
+    write(
+        format!("{prefix}headpose_static.csv"),
+        headpose::static_csv(&out.static_rows).into_bytes(),
+    )?;
+    write(
+        format!("{prefix}headpose_sequences.csv"),
+        headpose::sequences_csv(&out.sequence_rows).into_bytes(),
+    )?;
+    write(
+        format!("{prefix}headpose_trajectories.csv"),
+        out.trajectories_csv.clone().into_bytes(),
+    )?;
+    write(
+        format!("{prefix}headpose_curves.csv"),
+        curves_csv(&out.curves).into_bytes(),
+    )?;
+    if single {
+        let report = &spec.report_prefix;
+        write_atomic(
+            &out_root
+                .join("paper-tables")
+                .join(format!("{report}headpose.md")),
+            headpose::markdown(&out, spec).as_bytes(),
+        )?;
+        let source = FaceSource {
+            subdivisions: spec.dataset.subdivisions,
+            ..FaceSource::default()
+        };
+        let figures = out_root.join("figures").join(format!("{report}headpose"));
+        headpose::figures(&figures, &out, spec, &source.model()?)?;
+    }
+    Ok(())
+}
+
 /// Runs every cell of a spec file.
 pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     let cells = spec::load(spec_path, &opts.sets)?;
@@ -763,6 +820,20 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             spec::to_toml(&cell.spec.values).into_bytes(),
             &mut outputs,
         )?;
+        if cell.spec.tables.iter().any(|t| t == "headpose") {
+            headpose_outputs(
+                cell,
+                &prefix,
+                cells.len() == 1,
+                &out_root,
+                &cache,
+                &mut records,
+                &mut |rel, bytes| write(rel, bytes, &mut outputs),
+            )?;
+        }
+        if cell.spec.tables.iter().all(|t| t == "headpose") {
+            continue;
+        }
         let result = run_cell(cell, &a, &cache, &mut records)?;
         write(
             format!("{prefix}table1.csv"),

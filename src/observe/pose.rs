@@ -45,7 +45,9 @@ impl HeadPose {
     pub fn error_degrees(self, other: HeadPose) -> f64 {
         let r = self.rotation().transpose().mul(&other.rotation());
         let v = r.log();
-        (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().to_degrees()
+        (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+            .sqrt()
+            .to_degrees()
     }
 
     /// The pose of a head turned by `r` (model frame) from the frontal neutral face.

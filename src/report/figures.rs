@@ -260,3 +260,80 @@ pub fn edit_figure(
     }
     save(buffer, size, path)
 }
+
+/// A curve with its own x values.
+pub struct XySeries {
+    pub label: String,
+    pub points: Vec<(f64, f64)>,
+    pub color: RGBColor,
+    pub dashed: bool,
+}
+
+/// One panel of `line_panels`.
+pub struct Panel {
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    pub series: Vec<XySeries>,
+}
+
+/// Panels side by side (linear axes, each fitted to its data with 8 % headroom for the
+/// legend), saved as one PNG.
+pub fn line_panels(path: &Path, title: &str, panels: &[Panel]) -> Result<()> {
+    register_font();
+    let size = (520 * panels.len().max(1) as u32, 520u32);
+    let mut buffer = vec![255u8; (size.0 * size.1 * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, size).into_drawing_area();
+        root.fill(&WHITE)?;
+        let root = root.titled(title, ("sans-serif", 26))?;
+        let areas = root.split_evenly((1, panels.len().max(1)));
+        for (panel, area) in panels.iter().zip(&areas) {
+            let all = panel.series.iter().flat_map(|s| s.points.iter().copied());
+            let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+            for (x, y) in all.filter(|(x, y)| x.is_finite() && y.is_finite()) {
+                (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+            }
+            if x0 > x1 {
+                (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
+            }
+            let pad = ((y1 - y0) * 0.08).max(1e-9);
+            let (y0, y1) = (y0 - pad, y1 + 3.0 * pad);
+            let x1 = if x1 > x0 { x1 } else { x0 + 1.0 };
+            let mut chart = ChartBuilder::on(area)
+                .caption(&panel.title, ("sans-serif", 21))
+                .margin(14)
+                .x_label_area_size(48)
+                .y_label_area_size(64)
+                .build_cartesian_2d(x0..x1, y0..y1)?;
+            chart
+                .configure_mesh()
+                .x_desc(panel.x_label.as_str())
+                .y_desc(panel.y_label.as_str())
+                .label_style(("sans-serif", 16))
+                .axis_desc_style(("sans-serif", 18))
+                .draw()?;
+            for s in &panel.series {
+                let style = ShapeStyle::from(&s.color).stroke_width(2);
+                let drawn = if s.dashed {
+                    chart.draw_series(DashedLineSeries::new(s.points.clone(), 8, 5, style))?
+                } else {
+                    chart.draw_series(LineSeries::new(s.points.clone(), style))?
+                };
+                let color = s.color;
+                drawn.label(s.label.clone()).legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 24, y)], color.stroke_width(3))
+                });
+            }
+            chart
+                .configure_series_labels()
+                .label_font(("sans-serif", 15))
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::UpperLeft)
+                .draw()?;
+        }
+        root.present()?;
+    }
+    save(buffer, size, path)
+}

@@ -9,13 +9,14 @@ use super::raw::{set_path, Node, Origin, Value};
 use super::SpecError;
 use crate::cohort::{ClipParams, CohortKind, CohortParams, SubjectParams};
 use crate::experiments::dataset::{DatasetParams, SolveStart};
+use crate::experiments::headpose::HeadposeParams;
 use crate::experiments::inversion::InversionParams;
 use crate::learn::params::{ModelParams, Normalization, TrainParams};
 use crate::observe::ObserverNoise;
 use crate::sim::controls::edit_distance;
 
 /// The tables a spec can ask for.
-pub const TABLES: [&str; 3] = ["table1", "table2", "inversion"];
+pub const TABLES: [&str; 4] = ["table1", "table2", "inversion", "headpose"];
 
 /// Everything a run needs, validated.
 #[derive(Clone, Debug, PartialEq)]
@@ -38,6 +39,8 @@ pub struct Spec {
     pub table2_normalization: Normalization,
     /// The inversion table (`[inversion]`), used when `tables` has "inversion".
     pub inversion: InversionParams,
+    /// The head-neck experiment (`[headpose]`), used when `tables` has "headpose".
+    pub headpose: HeadposeParams,
     /// Prefix of the paper-table and figure names (`report.prefix`), so a smoke or test run
     /// does not overwrite the committed `paper-tables/table1.md`. Default "".
     pub report_prefix: String,
@@ -434,6 +437,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         })?,
         refinements: r.integer("inversion.refinements", iv.refinements as i64, 0, 20)? as usize,
     };
+    let headpose = read_headpose(&mut r)?;
     let cohort = read_cohort(&mut r)?;
     let table2_normalization =
         Normalization::parse(&r.choice("table2.normalization", "minmax", &["minmax", "zscore"])?)
@@ -473,7 +477,67 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         cohort,
         table2_normalization,
         inversion,
+        headpose,
         values,
+    })
+}
+
+fn read_headpose(r: &mut Reader) -> Result<HeadposeParams, SpecError> {
+    let d = HeadposeParams::default();
+    let positive =
+        |v: f64| (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"));
+    let degrees = |limit: f64| {
+        move |v: f64| (!(v >= 0.0 && v <= limit)).then(|| format!("= {v} must lie in [0, {limit}]"))
+    };
+    Ok(HeadposeParams {
+        seed: r.integer("headpose.seed", d.seed as i64, 0, i64::MAX)? as u64,
+        fit_targets: r.integer("headpose.fit_targets", d.fit_targets as i64, 2, 1_000_000)?
+            as usize,
+        poses_per_target: r.integer(
+            "headpose.poses_per_target",
+            d.poses_per_target as i64,
+            1,
+            10_000,
+        )? as usize,
+        test_fraction: r.float("headpose.test_fraction", d.test_fraction, &|v| {
+            (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
+        })?,
+        model: ModelParams {
+            layers: r.integer("headpose.layers", d.model.layers as i64, 1, 16)? as usize,
+            width: r.integer("headpose.width", d.model.width as i64, 1, 4096)? as usize,
+        },
+        train: TrainParams {
+            learning_rate: r.float("headpose.learning_rate", d.train.learning_rate, &positive)?,
+            batch_size: r.integer(
+                "headpose.batch_size",
+                d.train.batch_size as i64,
+                1,
+                1_000_000,
+            )? as usize,
+            epochs: r.integer("headpose.epochs", d.train.epochs as i64, 1, 100_000)? as usize,
+            normalization: d.train.normalization,
+        },
+        // The neck's commanded range is (40, 50, 30): targets beyond it would be clamped.
+        range_degrees: [
+            r.float("headpose.pitch_degrees", d.range_degrees[0], &degrees(40.0))?,
+            r.float("headpose.yaw_degrees", d.range_degrees[1], &degrees(50.0))?,
+            r.float("headpose.roll_degrees", d.range_degrees[2], &degrees(30.0))?,
+        ],
+        duration: r.float("headpose.duration", d.duration, &|v| {
+            (!(v >= 0.6 && v <= 60.0)).then(|| format!("= {v} must lie in [0.6, 60] s"))
+        })?,
+        settle_degrees: r.float("headpose.settle_degrees", d.settle_degrees, &positive)?,
+        sequence_seconds: r.float("headpose.sequence_seconds", d.sequence_seconds, &|v| {
+            (!(v >= 1.0 && v <= 60.0)).then(|| format!("= {v} must lie in [1, 60] s"))
+        })?,
+        reflex: crate::sim::neck::ReflexParams {
+            strain_gain: r.float("headpose.strain_gain", d.reflex.strain_gain, &|v| {
+                (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"))
+            })?,
+            rate_gain: r.float("headpose.rate_gain", d.reflex.rate_gain, &|v| {
+                (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"))
+            })?,
+        },
     })
 }
 

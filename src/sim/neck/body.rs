@@ -330,7 +330,11 @@ impl Skeleton {
             let d = f.rotation[p].apply(self.links[i].joint);
             f.rotation[i] = f.rotation[p].mul(&s.rotations[p]);
             f.origin[i] = add(f.origin[p], d);
-            let u = [s.velocity[3 * p], s.velocity[3 * p + 1], s.velocity[3 * p + 2]];
+            let u = [
+                s.velocity[3 * p],
+                s.velocity[3 * p + 1],
+                s.velocity[3 * p + 2],
+            ];
             f.omega[i] = add(f.omega[p], f.rotation[i].apply(u));
             f.velocity[i] = add(f.velocity[p], cross(f.omega[p], d));
             f.com[i] = f.point(i, self.links[i].com);
@@ -353,8 +357,7 @@ impl Skeleton {
                     let dd = dot(dj, dk);
                     for a in 0..3 {
                         for b in 0..3 {
-                            block[a][b] = link.mass
-                                * (if a == b { dd } else { 0.0 } - block[a][b])
+                            block[a][b] = link.mass * (if a == b { dd } else { 0.0 } - block[a][b])
                                 + inertia[a][b];
                         }
                     }
@@ -392,29 +395,24 @@ impl Skeleton {
         for i in 1..LINKS {
             let p = i - 1;
             let d = sub(f.origin[i], f.origin[p]);
-            let u = [s.velocity[3 * p], s.velocity[3 * p + 1], s.velocity[3 * p + 2]];
+            let u = [
+                s.velocity[3 * p],
+                s.velocity[3 * p + 1],
+                s.velocity[3 * p + 2],
+            ];
             let wu = f.rotation[i].apply(u);
             alpha[i] = add(alpha[p], cross(f.omega[p], wu));
             accel[i] = add(
                 accel[p],
-                add(
-                    cross(alpha[p], d),
-                    cross(f.omega[p], cross(f.omega[p], d)),
-                ),
+                add(cross(alpha[p], d), cross(f.omega[p], cross(f.omega[p], d))),
             );
             let e = sub(f.com[i], f.origin[i]);
             let w = f.omega[i];
-            let a_com = add(
-                accel[i],
-                add(cross(alpha[i], e), cross(w, cross(w, e))),
-            );
+            let a_com = add(accel[i], add(cross(alpha[i], e), cross(w, cross(w, e))));
             let link = &self.links[i];
             force[i] = scale(sub(a_com, self.gravity), link.mass);
             let inertia = rotate_inertia(&f.rotation[i], link.inertia);
-            moment[i] = add(
-                mat_vec(&inertia, alpha[i]),
-                cross(w, mat_vec(&inertia, w)),
-            );
+            moment[i] = add(mat_vec(&inertia, alpha[i]), cross(w, mat_vec(&inertia, w)));
         }
         // Accumulate from the skull down: total force of the subtree and its moment about
         // each joint.
@@ -443,8 +441,8 @@ impl Skeleton {
             let q = s.rotations[j].log();
             for a in 0..3 {
                 let v = s.velocity[3 * j + a];
-                tau[3 * j + a] = disc.spring(a, q[a])
-                    - if damping { disc.damping[a] * v } else { 0.0 };
+                tau[3 * j + a] =
+                    disc.spring(a, q[a]) - if damping { disc.damping[a] * v } else { 0.0 };
             }
         }
         tau
@@ -482,7 +480,9 @@ mod tests {
     #[test]
     fn mass_matrix_is_symmetric_positive_definite_and_matches_kinetic_energy() {
         let sk = Skeleton::new(&SkeletonParams::default());
-        let q: Vec<f64> = (0..DOF).map(|i| 0.05 * ((i * 7 % 5) as f64 - 2.0)).collect();
+        let q: Vec<f64> = (0..DOF)
+            .map(|i| 0.05 * ((i * 7 % 5) as f64 - 2.0))
+            .collect();
         let mut s = BodyState::from_angles(&q);
         for (i, v) in s.velocity.iter_mut().enumerate() {
             *v = 0.3 * ((i * 3 % 7) as f64 - 3.0);
@@ -501,20 +501,26 @@ mod tests {
             let l = &sk.links[i];
             let v = f.point_velocity(i, f.com[i]);
             let inertia = rotate_inertia(&f.rotation[i], l.inertia);
-            direct += 0.5 * l.mass * dot(v, v) + 0.5 * dot(f.omega[i], mat_vec(&inertia, f.omega[i]));
+            direct +=
+                0.5 * l.mass * dot(v, v) + 0.5 * dot(f.omega[i], mat_vec(&inertia, f.omega[i]));
         }
         let u = &s.velocity;
         let from_m: f64 = (0..DOF)
             .map(|r| u[r] * (0..DOF).map(|c| m[r * DOF + c] * u[c]).sum::<f64>())
             .sum::<f64>()
             * 0.5;
-        assert!((direct - from_m).abs() < 1e-12 * direct.max(1.0), "{direct} vs {from_m}");
+        assert!(
+            (direct - from_m).abs() < 1e-12 * direct.max(1.0),
+            "{direct} vs {from_m}"
+        );
     }
 
     #[test]
     fn static_bias_is_the_gradient_of_gravitational_energy() {
         let sk = Skeleton::new(&SkeletonParams::default());
-        let q: Vec<f64> = (0..DOF).map(|i| 0.04 * ((i * 5 % 7) as f64 - 3.0)).collect();
+        let q: Vec<f64> = (0..DOF)
+            .map(|i| 0.04 * ((i * 5 % 7) as f64 - 3.0))
+            .collect();
         let s = BodyState::from_angles(&q);
         let f = sk.frames(&s);
         let c = sk.bias(&s, &f);
@@ -537,7 +543,10 @@ mod tests {
                 minus.rotations[j] = s.rotations[j].mul(&Rot3::exp(axis));
                 let numeric = (potential(&plus) - potential(&minus)) / (2.0 * h);
                 let got = c[3 * j + a];
-                assert!((numeric - got).abs() < 1e-6, "joint {j} axis {a}: {numeric} vs {got}");
+                assert!(
+                    (numeric - got).abs() < 1e-6,
+                    "joint {j} axis {a}: {numeric} vs {got}"
+                );
             }
         }
     }

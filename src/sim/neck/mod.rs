@@ -32,6 +32,8 @@ pub enum NeckError {
     Singular { time: f64 },
     #[error("head pose of frame {frame} is not a number ({what})")]
     NotANumber { frame: usize, what: String },
+    #[error("the voluntary controller failed: {0}")]
+    Controller(String),
     #[error("no equilibrium: {reason}")]
     Equilibrium { reason: String },
     #[error("no posture reaches head pose {pose:?} (degrees): {reason}")]
@@ -132,8 +134,12 @@ pub struct Observation {
 
 /// A voluntary (25 Hz) controller.
 pub trait Voluntary {
-    fn command(&mut self, neck: &Neck, seen: &Observation, target: HeadPose)
-        -> Result<Command, NeckError>;
+    fn command(
+        &mut self,
+        neck: &Neck,
+        seen: &Observation,
+        target: HeadPose,
+    ) -> Result<Command, NeckError>;
 }
 
 /// The neck: skeleton, muscles and parameters.
@@ -147,24 +153,10 @@ pub struct Neck {
     pub shares: [V3; JOINTS],
 }
 
-/// Static generalized force (N m) below which a posture counts as an equilibrium.
-const EQUILIBRIUM_TOLERANCE: f64 = 1e-9;
-/// Skull orientation error (rad) at which the fit stops improving the head.
-const FIT_TOLERANCE: f64 = 1e-5;
-
-/// A static equilibrium of the neck under fixed activations.
-#[derive(Clone, Debug)]
-pub struct Equilibrium {
-    /// Joint angles (exponential coordinates, rad).
-    pub angles: [f64; DOF],
-    /// `K = -dG/dq` (row-major DOF x DOF), positive definite.
-    pub stiffness: Vec<f64>,
-    pub head: Rot3,
-    /// d log(R_head(q0)^T R_head(q)) / dq (row-major 3 x DOF).
-    pub head_jacobian: Vec<f64>,
-    pub muscles: MuscleState,
-    pub iterations: usize,
-}
+/// The fit's residual weights: per N m of unbalanced joint torque and per radian of skull
+/// orientation error (the posture prior has `posture_weight`, the effort `effort_weight`).
+const FIT_TORQUE_SCALE: f64 = 10.0;
+const FIT_ANGLE_SCALE: f64 = 10.0;
 
 /// The activations that hold a head pose, and the strains there (the voluntary setpoints).
 #[derive(Clone, Debug, PartialEq)]
@@ -174,6 +166,8 @@ pub struct Fit {
     pub strain: Vec<f64>,
     /// Skull orientation error left at the equilibrium (degrees).
     pub error_degrees: f64,
+    /// Unbalanced joint torque left (N m): the reflex absorbs it with a small deflection.
+    pub torque_residual: f64,
     pub iterations: usize,
 }
 
@@ -201,9 +195,8 @@ impl Neck {
                 totals[a] += rom[a];
             }
         }
-        let shares = body::RANGE_OF_MOTION_DEGREES.map(|rom| {
-            [rom[0] / totals[0], rom[1] / totals[1], rom[2] / totals[2]]
-        });
+        let shares = body::RANGE_OF_MOTION_DEGREES
+            .map(|rom| [rom[0] / totals[0], rom[1] / totals[1], rom[2] / totals[2]]);
         Neck {
             params,
             skeleton,
@@ -348,50 +341,6 @@ impl Neck {
         (g, f.rotation[SKULL], ms)
     }
 
-    /// The posture at which activations `a` hold the neck still, by damped Newton from
-    /// `start` with the stiffness by forward differences. Errors if it does not converge or
-    /// the equilibrium is unstable.
-    pub fn equilibrium(&self, a: &[f64], start: &[f64; DOF]) -> Result<Equilibrium, NeckError> {
-        let mut q = *start;
-        let norm = |g: &[f64; DOF]| g.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let (mut g, _, _) = self.static_force(&q, a);
-        for iteration in 0..100 {
-            if norm(&g) < EQUILIBRIUM_TOLERANCE {
-                let (g, head, ms) = self.static_force(&q, a);
-                let reference = head.transpose();
-                let (stiffness, head_jacobian) = self.stiffness(&q, a, &g, Some(&reference));
-                return Ok(Equilibrium {
-                    angles: q,
-                    stiffness,
-                    head,
-                    head_jacobian,
-                    muscles: ms,
-                    iterations: iteration,
-                });
-            }
-            let (k, _) = self.stiffness(&q, a, &g, None);
-            let step = solve_dense(&k, DOF, &g, 1).ok_or_else(|| NeckError::Equilibrium {
-                reason: "singular stiffness".into(),
-            })?;
-            let longest = step.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            let mut t = (0.2 / longest.max(1e-300)).min(1.0);
-            let before = norm(&g);
-            loop {
-                let trial: [f64; DOF] = std::array::from_fn(|i| q[i] + t * step[i]);
-                let (gt, _, _) = self.static_force(&trial, a);
-                if norm(&gt) < before || t < 1e-6 {
-                    q = trial;
-                    g = gt;
-                    break;
-                }
-                t *= 0.5;
-            }
-        }
-        Err(NeckError::Equilibrium {
-            reason: format!("Newton did not converge (residual {:.2e} N m)", norm(&g)),
-        })
-    }
-
     /// `K = -dG/dq` (row-major) by forward differences at `q` where the force is `g`, and
     /// with `reference` the Jacobian of `log(reference R_skull)` (3 x DOF, row-major).
     fn stiffness(
@@ -425,100 +374,176 @@ impl Neck {
         (k, jh)
     }
 
-    /// The activations that hold the head at `target` at a stable equilibrium, found by
-    /// Gauss-Newton on `|e_head|^2 + w_p |q - q_shared|^2 + lambda |a|^2` over a in [0, 1]^72
-    /// (each step a box QP), where the equilibrium posture q(a) and its sensitivity
-    /// `dq/da = K^-1 dG/da` come from `equilibrium`, `e_head` is the skull's orientation error
-    /// and `q_shared` the posture sharing the rotation by range of motion (`posture`).
-    /// Many activations hold a pose; the ridge picks the least effort.
+    /// The activations that hold the head at `target` at equilibrium, with the posture and
+    /// the muscle strains there: Gauss-Newton (Levenberg-Marquardt damped) on
+    /// `s_G^2 |G(q, a)|^2 + s_h^2 |e_head(q)|^2 + w_p^2 |q - q_shared|^2 + lambda |a|^2` over the
+    /// joint angles q and a in [0, 1]^72 jointly, with G the static generalized force (zero at
+    /// equilibrium), `e_head` the skull's orientation error and `q_shared` the posture that
+    /// shares the rotation among the joints by range of motion (`posture`). Each step
+    /// eliminates the posture step and solves a box QP in the activations. Many activations
+    /// hold a pose; the ridge picks the least effort. The posture is a free unknown, so the
+    /// fit never has to follow the passive neck's folding equilibrium branches; the
+    /// equilibrium need not be passively stable, since the reflex stiffens it.
+    /// `warm` starts from an earlier fit instead of rest.
     pub fn fit(&self, target: HeadPose, warm: Option<&Fit>) -> Result<Fit, NeckError> {
         let prior = self.posture(target)?.angles();
         let w_p = self.params.posture_weight;
         let lambda = self.params.effort_weight;
         let goal = target.rotation().transpose();
         let mut a = warm.map_or(vec![0.0; MUSCLES], |w| w.activation.clone());
-        let start = warm.map_or(prior, |w| w.angles);
-        let mut eq = self.equilibrium(&a, &start)?;
-        let residual = |eq: &Equilibrium| -> Vec<f64> {
-            let mut r = goal.mul(&eq.head).log().to_vec();
-            r.extend((0..DOF).map(|i| w_p * (eq.angles[i] - prior[i])));
-            r
+        let mut q = warm.map_or(prior, |w| w.angles);
+        const ROWS: usize = 2 * DOF + 3;
+        // The scaled residual [s_G G; s_h e; w_p (q - prior)] and the objective.
+        let evaluate = |q: &[f64; DOF], a: &[f64]| {
+            let (g, head, ms) = self.static_force(q, a);
+            let e = goal.mul(&head).log();
+            let mut r = Vec::with_capacity(ROWS);
+            r.extend(g.iter().map(|v| FIT_TORQUE_SCALE * v));
+            r.extend(e.iter().map(|v| FIT_ANGLE_SCALE * v));
+            r.extend((0..DOF).map(|i| w_p * (q[i] - prior[i])));
+            let phi = r.iter().map(|v| v * v).sum::<f64>()
+                + lambda * a.iter().map(|v| v * v).sum::<f64>();
+            (r, g, ms, phi)
         };
-        let objective = |r: &[f64], a: &[f64]| {
-            r.iter().map(|v| v * v).sum::<f64>() + lambda * a.iter().map(|v| v * v).sum::<f64>()
-        };
-        let mut r = residual(&eq);
+        let (mut r, mut g, mut ms, mut phi) = evaluate(&q, &a);
         let mut iterations = 0;
-        while iterations < 40 {
+        // Levenberg-Marquardt damping, raised when a step fails.
+        let mut mu = 0.0f64;
+        while iterations < 80 {
             iterations += 1;
-            // dG/da_k = -F_l,k dl_k/dq; dq/da = K^-1 dG/da.
+            let (k, jh) = self.stiffness(&q, &a, &g, Some(&goal));
+            // Linearized residual M_a a' + M_q dq - d.
             let hill = &self.params.hill;
-            let mut ga = vec![0.0; DOF * MUSCLES];
-            for (k, (m, geo)) in self.muscles.iter().zip(&eq.muscles.geometry).enumerate() {
+            let mut m_a = vec![0.0; ROWS * MUSCLES];
+            for (c, (m, geo)) in self.muscles.iter().zip(&ms.geometry).enumerate() {
                 let fl = m.force_length(hill, geo.length);
                 for i in 0..DOF {
-                    ga[i * MUSCLES + k] = -fl * geo.gradient[i];
+                    m_a[i * MUSCLES + c] = -FIT_TORQUE_SCALE * fl * geo.gradient[i];
                 }
             }
-            let dq = solve_dense(&eq.stiffness, DOF, &ga, MUSCLES).ok_or_else(|| {
-                NeckError::Equilibrium {
-                    reason: "singular stiffness".into(),
+            let mut m_q = vec![0.0; ROWS * DOF];
+            for i in 0..DOF {
+                for j in 0..DOF {
+                    m_q[i * DOF + j] = -FIT_TORQUE_SCALE * k[i * DOF + j];
                 }
-            })?;
-            let columns: Vec<Vec<f64>> = (0..MUSCLES)
-                .map(|k| {
-                    let mut col: Vec<f64> = (0..3)
-                        .map(|row| {
-                            (0..DOF)
-                                .map(|i| eq.head_jacobian[row * DOF + i] * dq[i * MUSCLES + k])
-                                .sum()
-                        })
-                        .collect();
-                    col.extend((0..DOF).map(|i| w_p * dq[i * MUSCLES + k]));
-                    col
-                })
-                .collect();
-            // Linearized residual r + J (a' - a) = J a' - d with d = J a - r.
-            let d: Vec<f64> = (0..r.len())
+                m_q[(DOF + 3 + i) * DOF + i] = w_p;
+            }
+            for row in 0..3 {
+                for j in 0..DOF {
+                    m_q[(DOF + row) * DOF + j] = FIT_ANGLE_SCALE * jh[row * DOF + j];
+                }
+            }
+            // d = M_a a - r (the residual at a' = a, dq = 0 is r).
+            let d: Vec<f64> = (0..ROWS)
                 .map(|row| {
-                    columns.iter().zip(&a).map(|(c, ak)| c[row] * ak).sum::<f64>() - r[row]
+                    (0..MUSCLES)
+                        .map(|c| m_a[row * MUSCLES + c] * a[c])
+                        .sum::<f64>()
+                        - r[row]
                 })
                 .collect();
-            let mut qp = BoxQp::least_squares(&columns, &d);
-            for i in 0..qp.n {
-                qp.h[i * qp.n + i] += lambda;
+            // Eliminate dq = N^-1 M_q^T (d - M_a a'), N = M_q^T M_q + mu I: the residual becomes
+            // P (M_a a' - d) with P = I - M_q N^-1 M_q^T.
+            let mut n = vec![0.0; DOF * DOF];
+            for i in 0..DOF {
+                for j in 0..DOF {
+                    n[i * DOF + j] = (0..ROWS)
+                        .map(|row| m_q[row * DOF + i] * m_q[row * DOF + j])
+                        .sum();
+                }
+                n[i * DOF + i] += mu;
             }
-            let proposal = projected_gradient(&qp, &a, 1e-9, 5000).a;
-            let before = objective(&r, &a);
-            let mut t = 1.0;
+            let m_qt: Vec<f64> = (0..DOF * ROWS)
+                .map(|x| m_q[(x % ROWS) * DOF + x / ROWS])
+                .collect();
+            let n_inv_mqt =
+                solve_dense(&n, DOF, &m_qt, ROWS).ok_or_else(|| NeckError::Equilibrium {
+                    reason: "singular posture system".into(),
+                })?;
+            let project = |v: &[f64]| -> Vec<f64> {
+                let y: Vec<f64> = (0..DOF)
+                    .map(|i| {
+                        (0..ROWS)
+                            .map(|row| n_inv_mqt[i * ROWS + row] * v[row])
+                            .sum()
+                    })
+                    .collect();
+                (0..ROWS)
+                    .map(|row| v[row] - (0..DOF).map(|i| m_q[row * DOF + i] * y[i]).sum::<f64>())
+                    .collect()
+            };
+            let columns: Vec<Vec<f64>> = (0..MUSCLES)
+                .map(|c| {
+                    project(
+                        &(0..ROWS)
+                            .map(|row| m_a[row * MUSCLES + c])
+                            .collect::<Vec<_>>(),
+                    )
+                })
+                .collect();
+            let mut qp = BoxQp::least_squares(&columns, &project(&d));
+            for i in 0..qp.n {
+                qp.h[i * qp.n + i] += lambda + mu;
+                qp.g[i] += mu * a[i];
+            }
+            let proposal = projected_gradient(&qp, &a, 1e-10, 5000).a;
+            let rest: Vec<f64> = (0..ROWS)
+                .map(|row| {
+                    d[row]
+                        - (0..MUSCLES)
+                            .map(|c| m_a[row * MUSCLES + c] * proposal[c])
+                            .sum::<f64>()
+                })
+                .collect();
+            let dq: Vec<f64> = (0..DOF)
+                .map(|i| {
+                    (0..ROWS)
+                        .map(|row| n_inv_mqt[i * ROWS + row] * rest[row])
+                        .sum()
+                })
+                .collect();
             let mut accepted = false;
-            while t > 1e-3 {
-                let trial: Vec<f64> = a.iter().zip(&proposal).map(|(x, p)| x + t * (p - x)).collect();
-                if let Ok(next) = self.equilibrium(&trial, &eq.angles) {
-                    let rn = residual(&next);
-                    if objective(&rn, &trial) < before {
-                        a = trial;
-                        eq = next;
-                        r = rn;
-                        accepted = true;
-                        break;
+            let mut t = 1.0;
+            while t > 0.1 {
+                let qt: [f64; DOF] = std::array::from_fn(|i| q[i] + t * dq[i]);
+                let at: Vec<f64> = a
+                    .iter()
+                    .zip(&proposal)
+                    .map(|(x, p)| x + t * (p - x))
+                    .collect();
+                let (rt, gt, mst, phit) = evaluate(&qt, &at);
+                if phit < phi {
+                    let gain = phi - phit;
+                    (q, a, r, g, ms, phi) = (qt, at, rt, gt, mst, phit);
+                    accepted = true;
+                    if gain < 1e-7 * phi {
+                        iterations = usize::MAX - 1;
                     }
+                    break;
                 }
                 t *= 0.5;
             }
-            let error = r[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
-            if !accepted || (error < FIT_TOLERANCE && t == 1.0 && before - objective(&r, &a) < 1e-12) {
+            if !accepted {
+                mu = (mu * 10.0).max(1e-4);
+                if mu > 1e4 {
+                    break;
+                }
+            } else if mu > 0.0 {
+                mu = if mu < 1e-6 { 0.0 } else { mu / 10.0 };
+            }
+            if iterations == usize::MAX - 1 {
                 break;
             }
         }
-        let error = r[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
-        let strain = self.strains(&eq.muscles);
+        let error = r[DOF..DOF + 3].iter().map(|v| v * v).sum::<f64>().sqrt() / FIT_ANGLE_SCALE;
+        let torque = g.iter().map(|v| v * v).sum::<f64>().sqrt();
         Ok(Fit {
             activation: a,
-            angles: eq.angles,
-            strain,
+            angles: q,
+            strain: self.strains(&ms),
             error_degrees: error.to_degrees(),
-            iterations,
+            torque_residual: torque,
+            iterations: iterations.min(80),
         })
     }
 
@@ -547,10 +572,7 @@ impl Neck {
                 system[i * DOF + i] += h * damp + h * h * d.tangent(a, q[a]);
             }
         }
-        let (k_e, k_v) = (
-            self.params.reflex.strain_gain,
-            self.params.reflex.rate_gain,
-        );
+        let (k_e, k_v) = (self.params.reflex.strain_gain, self.params.reflex.rate_gain);
         let mut applied = Vec::with_capacity(MUSCLES);
         for (k, m) in self.muscles.iter().enumerate() {
             let g = muscles::geometry(&m.path, &f);
@@ -599,7 +621,11 @@ impl Neck {
             return Err(NeckError::Diverged { time });
         }
         for j in 0..JOINTS {
-            let u = [s.velocity[3 * j], s.velocity[3 * j + 1], s.velocity[3 * j + 2]];
+            let u = [
+                s.velocity[3 * j],
+                s.velocity[3 * j + 1],
+                s.velocity[3 * j + 2],
+            ];
             s.rotations[j] = s.rotations[j].mul(&Rot3::exp(u.map(|v| v * h)));
         }
         Ok(StepReport {
@@ -643,7 +669,11 @@ impl Teacher {
         Ok(Command {
             activation: fit.activation.clone(),
             strain: fit.strain.clone(),
-            strain_rate: to.iter().zip(&from).map(|(e, e0)| (e - e0) / time).collect(),
+            strain_rate: to
+                .iter()
+                .zip(&from)
+                .map(|(e, e0)| (e - e0) / time)
+                .collect(),
         })
     }
 }
@@ -827,11 +857,19 @@ mod tests {
         for (j, rom) in body::RANGE_OF_MOTION_DEGREES.iter().enumerate() {
             for a in 0..3 {
                 let angle = q[3 * j + a].to_degrees().abs();
-                assert!(angle < rom[a], "joint {j} axis {a}: {angle} deg beyond {}", rom[a]);
+                assert!(
+                    angle < rom[a],
+                    "joint {j} axis {a}: {angle} deg beyond {}",
+                    rom[a]
+                );
             }
         }
         // It has (nearly) come to rest: only a slow creep against the ligaments is left.
-        assert!(s.velocity.iter().all(|v| v.abs() < 0.02), "{:?}", s.velocity);
+        assert!(
+            s.velocity.iter().all(|v| v.abs() < 0.02),
+            "{:?}",
+            s.velocity
+        );
     }
 
     #[test]
@@ -844,7 +882,10 @@ mod tests {
         let s = passive_run(&neck, 0.5, &command);
         let pose = neck.observe(&s).pose;
         assert!(pose.yaw.abs() < 1e-9 && pose.roll.abs() < 1e-9, "{pose:?}");
-        assert!(pose.pitch.abs() > 1e-3, "the activations should move the head: {pose:?}");
+        assert!(
+            pose.pitch.abs() > 1e-3,
+            "the activations should move the head: {pose:?}"
+        );
     }
 
     #[test]
@@ -866,7 +907,10 @@ mod tests {
         // The head falls about 35 degrees and swings: about 0.5 J goes between gravity,
         // springs and motion; the total may wander by a few percent of that.
         assert!(hi - lo < 0.02, "energy wandered {lo} .. {hi} J");
-        assert!(neck.observe(&s).pose.pitch.abs() > 0.05, "the head should have moved");
+        assert!(
+            neck.observe(&s).pose.pitch.abs() > 0.05,
+            "the head should have moved"
+        );
     }
 
     #[test]
@@ -906,7 +950,10 @@ mod tests {
             })
             .collect();
         for (d, worst) in errors {
-            assert!(worst < 2.0, "target {d:?}: {worst:.2} deg off over the last 0.5 s");
+            assert!(
+                worst < 2.0,
+                "target {d:?}: {worst:.2} deg off over the last 0.5 s"
+            );
         }
     }
 
@@ -920,8 +967,15 @@ mod tests {
                 .collect(),
         };
         let run = || {
-            simulate(&neck, &mut Teacher::default(), &targets, BodyState::rest(), 0.4, 8)
-                .unwrap()
+            simulate(
+                &neck,
+                &mut Teacher::default(),
+                &targets,
+                BodyState::rest(),
+                0.4,
+                8,
+            )
+            .unwrap()
         };
         let (a, b) = (run(), run());
         let bits = |t: &Trajectory| -> Vec<u64> {
@@ -939,10 +993,7 @@ mod tests {
         let neck = Neck::new(NeckParams::default());
         let seq = PoseSequence {
             fps: 30.0,
-            poses: vec![
-                HeadPose::default(),
-                HeadPose::from_degrees(10.0, 80.0, 0.0),
-            ],
+            poses: vec![HeadPose::default(), HeadPose::from_degrees(10.0, 80.0, 0.0)],
         };
         let (clamped, warnings) = seq.checked(&neck).unwrap();
         assert_eq!(warnings.len(), 1);
@@ -953,10 +1004,21 @@ mod tests {
         assert!((clamped.poses[1].degrees()[1] - 50.0).abs() < 1e-9);
         let bad = PoseSequence {
             fps: 30.0,
-            poses: vec![HeadPose::default(), HeadPose::default(), HeadPose::from_degrees(0.0, 0.0, f64::NAN)],
+            poses: vec![
+                HeadPose::default(),
+                HeadPose::default(),
+                HeadPose::from_degrees(0.0, 0.0, f64::NAN),
+            ],
         };
-        let err = simulate(&neck, &mut Teacher::default(), &bad, BodyState::rest(), 0.1, 10)
-            .unwrap_err();
+        let err = simulate(
+            &neck,
+            &mut Teacher::default(),
+            &bad,
+            BodyState::rest(),
+            0.1,
+            10,
+        )
+        .unwrap_err();
         assert_eq!(
             err.to_string(),
             "head pose of frame 2 is not a number (roll)"
@@ -978,7 +1040,8 @@ mod tests {
             strain_rate: vec![0.0; MUSCLES],
         };
         for n in 0..2000 {
-            neck.step(&mut s, &command, true, n as f64 / 4000.0).unwrap();
+            neck.step(&mut s, &command, true, n as f64 / 4000.0)
+                .unwrap();
         }
         let err = neck.observe(&s).pose.error_degrees(target);
         assert!(err < 0.2, "drifted {err} deg");
