@@ -7,7 +7,9 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use anyhow::Context;
-use facelab::experiments::bench::{bench_neck, bench_observe, bench_solve, bench_train, bench_transfer};
+use facelab::experiments::bench::{
+    bench_neck, bench_observe, bench_solve, bench_train, bench_transfer,
+};
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
 use facelab::experiments::observe;
 use facelab::experiments::run;
@@ -190,6 +192,10 @@ enum Command {
         /// Frames to render as PNG [default: first, middle and last]
         #[arg(long, value_delimiter = ',')]
         frames: Vec<i64>,
+        /// Keep the head still even when the file has pose_Rx, pose_Ry, pose_Rz (by default
+        /// they drive the neck, with the run's voluntary.safetensors)
+        #[arg(long)]
+        ignore_pose: bool,
         #[arg(long)]
         out: PathBuf,
     },
@@ -419,6 +425,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             model,
             normalize,
             frames,
+            ignore_pose,
             out,
         } => {
             let summary = transfer::transfer_openface(&transfer::TransferOptions {
@@ -427,7 +434,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 normalize: Normalization::parse(&normalize).expect("clap checked"),
                 out,
                 render_frames: frames,
+                ignore_pose,
             })?;
+            if let Some((rms, max)) = summary.pose_error {
+                println!("head pose through the neck: RMS error {rms:.2} deg, max {max:.2} deg");
+            }
             println!(
                 "{} frames transferred, {} skipped (success = 0); AU MSE mean {:.4}",
                 summary.rows,

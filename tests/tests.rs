@@ -4,6 +4,7 @@
 mod choe;
 mod cli;
 mod harness;
+mod neck;
 mod observe;
 mod openface;
 mod sim;

@@ -20,17 +20,17 @@ use crate::learn::mlp::{train, Curves, Mlp, Pairs};
 use crate::learn::params::{ModelParams, Normalization, TrainParams};
 use crate::report::compose::{labelled_grid, png_bytes};
 use crate::report::figures::{line_panels, Panel, XySeries, PALETTE};
-use crate::report::render::{render, RenderOptions};
+use crate::report::render::{render, Camera, RenderOptions};
 use crate::rng::stream;
 use crate::sim::geom::{Rigid, V3};
 use crate::sim::neck::{
     simulate, BodyState, Command, HeadPose, Neck, NeckError, NeckParams, Observation, PoseSequence,
-    ReflexParams, Teacher, Trajectory, Voluntary, MUSCLES, SKULL,
+    ReflexParams, Teacher, Trajectory, Voluntary, MUSCLES,
 };
 use crate::sim::{FaceModel, State};
 
 /// Bump when the data, training or evaluation change meaning.
-const HEADPOSE_VERSION: u32 = 1;
+const HEADPOSE_VERSION: u32 = 2;
 /// Strains are scaled by this in the network's outputs so that they weigh like activations.
 const STRAIN_SCALE: f64 = 10.0;
 const INPUTS: usize = 9;
@@ -345,6 +345,8 @@ pub struct Output {
     pub curves: Curves,
     pub pairs: (usize, usize),
     pub missed_fits: usize,
+    /// The voluntary network (safetensors).
+    pub weights: Vec<u8>,
     /// Kept for the figures.
     runs: Vec<(&'static str, String, Trajectory)>,
 }
@@ -527,6 +529,7 @@ pub fn stage(
         curves,
         pairs: (train_pairs.len(), test_pairs.len()),
         missed_fits: missed,
+        weights: mlp.to_safetensors()?,
         runs: all,
     })
 }
@@ -750,16 +753,14 @@ fn hill_figure(path: &Path, neck: &Neck) -> Result<()> {
     )
 }
 
-/// The face carried by the skull: the skull's rotation about the occipital condyles and its
-/// translation, in the face's frame (metres, +y up, +z out of the face).
-pub fn face_motion(neck: &Neck, state: &BodyState) -> Rigid {
-    let f = neck.skeleton.frames(state);
-    let rest = neck.skeleton.frames(&BodyState::rest());
-    let t: V3 = std::array::from_fn(|k| f.origin[SKULL][k] - rest.origin[SKULL][k]);
+/// The face carried by the skull: the skull's rotation about the occipital condyles and the
+/// condyles' displacement, in the face's frame (metres, +y up, +z out of the face; the neck's
+/// frame has the same axes).
+pub fn face_motion(pose: HeadPose, skull_offset: V3) -> Rigid {
     Rigid {
-        rotation: f.rotation[SKULL],
+        rotation: pose.rotation(),
         pivot: CONDYLES,
-        translation: t,
+        translation: skull_offset,
     }
 }
 
@@ -833,13 +834,19 @@ pub fn figures(
     let options = RenderOptions {
         width: 300,
         height: 350,
+        camera: Camera::head_motion(),
         ..RenderOptions::default()
     };
     let mut cells = Vec::new();
     let mut labels = Vec::new();
     for case in &shown {
         if let Some(run) = find("learned", case) {
-            let state = posed_face(&rest, &face_motion(&neck, &run.final_state));
+            let (pose, offset) = (run.pose.last(), run.skull_offset.last());
+            let motion = face_motion(
+                pose.copied().unwrap_or_default(),
+                offset.copied().unwrap_or_default(),
+            );
+            let state = posed_face(&rest, &motion);
             cells.push(render(model, &state, &options));
             let d = run.pose.last().copied().unwrap_or_default().degrees();
             labels.push(format!("{:.0} / {:.0} / {:.0}", d[0], d[1], d[2]));

@@ -765,6 +765,10 @@ fn headpose_outputs(
         format!("{prefix}headpose_curves.csv"),
         curves_csv(&out.curves).into_bytes(),
     )?;
+    write(
+        format!("{prefix}voluntary.safetensors"),
+        out.weights.clone(),
+    )?;
     if single {
         let report = &spec.report_prefix;
         write_atomic(

@@ -12,6 +12,7 @@ use anyhow::{bail, Context, Result};
 use image::RgbImage;
 
 use super::face::FaceSource;
+use super::headpose::{face_motion, posed_face, Learned};
 use super::observe::model_observer;
 use super::table2::{au_mse, predict_activations, solve_clip};
 use crate::io::atomic::write_atomic;
@@ -20,9 +21,10 @@ use crate::io::openface::{read_openface, write_openface, FaceRow};
 use crate::learn::{Mlp, Normalization, Normalizer};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::gif_bytes;
-use crate::report::render::{render, RenderOptions};
+use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::controls::control_names;
+use crate::sim::neck::{simulate, BodyState, HeadPose, NeckError, PoseSequence};
 use crate::sim::{solve_from_rest, SolveParams, Workspace};
 
 #[derive(Clone, Debug)]
@@ -34,6 +36,8 @@ pub struct TransferOptions {
     pub out: PathBuf,
     /// Frames (the file's `frame` numbers) to render; empty: first, middle and last.
     pub render_frames: Vec<i64>,
+    /// Keep the head still although the file has pose.
+    pub ignore_pose: bool,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -41,6 +45,9 @@ pub struct TransferSummary {
     pub rows: usize,
     pub skipped: usize,
     pub mse: [f64; AU_COUNT],
+    /// RMS and largest angle (degrees) between the file's head pose and the neck's, when the
+    /// pose drove the neck.
+    pub pose_error: Option<(f64, f64)>,
     pub written: Vec<PathBuf>,
 }
 
@@ -176,10 +183,29 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
             );
         }
     }
+    let dt = match (file.rows[0].timestamp, file.rows[n - 1].timestamp) {
+        (Some(a), Some(b)) if b > a && n > 1 => (b - a) / (n - 1) as f64,
+        _ => 1.0 / 30.0,
+    };
+    let head = if !opts.ignore_pose && file.rows.iter().all(|r| r.pose.is_some()) {
+        Some(drive_neck(opts, &spec, &file.rows, dt)?)
+    } else {
+        None
+    };
     let gif_every = n.div_ceil(300).max(1);
+    // A moving head needs the wider frame.
+    let camera = match head {
+        Some(_) => Camera::head_motion(),
+        None => Camera::frontal(),
+    };
+    let still = RenderOptions {
+        camera,
+        ..RenderOptions::default()
+    };
     let cell = RenderOptions {
         width: 240,
         height: 280,
+        camera,
         ..RenderOptions::default()
     };
     let mut transferred = Vec::with_capacity(n);
@@ -196,8 +222,17 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
             let o = observer.observe(&landmarks(state.surface(model.vertex_count())))?;
             transferred.push(o.aus);
             let frame = file.rows[i].frame;
+            let posed;
+            let state = match &head {
+                Some(h) => {
+                    let motion = face_motion(h.pose[i], h.offset[i]);
+                    posed = posed_face(state, &motion);
+                    &posed
+                }
+                None => state,
+            };
             if wanted.contains(&frame) {
-                stills.push((frame, render(&model, state, &RenderOptions::default())));
+                stills.push((frame, render(&model, state, &still)));
             }
             if n > 1 && i % gif_every == 0 {
                 frames.push(render(&model, state, &cell));
@@ -213,9 +248,14 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         .rows
         .iter()
         .zip(&transferred)
-        .map(|(r, aus)| FaceRow {
+        .enumerate()
+        .map(|(i, (r, aus))| FaceRow {
             aus: *aus,
-            pose: None,
+            // The neck's head rotation, with the file's translation.
+            pose: head.as_ref().and_then(|h| {
+                let p = h.pose[i];
+                r.pose.map(|t| [t[0], t[1], t[2], p.pitch, p.yaw, p.roll])
+            }),
             landmarks_2d: None,
             landmarks_3d: None,
             ..r.clone()
@@ -250,11 +290,24 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         mse.iter().sum::<f64>() / AU_COUNT as f64
     ));
     write("mse.csv", text.as_bytes())?;
+    let mut pose_error = None;
+    if let Some(h) = &head {
+        let mut text =
+            String::from("frame,target_Rx,target_Ry,target_Rz,pose_Rx,pose_Ry,pose_Rz,error_deg\n");
+        let mut errors = Vec::with_capacity(n);
+        for ((r, target), pose) in file.rows.iter().zip(&h.target).zip(&h.pose) {
+            let e = pose.error_degrees(*target);
+            errors.push(e);
+            text.push_str(&format!(
+                "{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{e:.3}\n",
+                r.frame, target.pitch, target.yaw, target.roll, pose.pitch, pose.yaw, pose.roll
+            ));
+        }
+        write("head_pose.csv", text.as_bytes())?;
+        let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt();
+        pose_error = Some((rms, errors.iter().copied().fold(0.0, f64::max)));
+    }
     if frames.len() > 1 {
-        let dt = match (file.rows[0].timestamp, file.rows[n - 1].timestamp) {
-            (Some(a), Some(b)) if b > a => (b - a) / (n - 1) as f64,
-            _ => 1.0 / 30.0,
-        };
         let delay = (1000.0 * dt * gif_every as f64).round().max(20.0) as u32;
         write("transfer.gif", &gif_bytes(&frames, delay)?)?;
     }
@@ -267,6 +320,87 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         rows: n,
         skipped: file.skipped,
         mse,
+        pose_error,
         written,
+    })
+}
+
+/// The neck's response to a file's head pose, per frame.
+struct HeadTrack {
+    /// The file's pose (clamped into the neck's range).
+    target: Vec<HeadPose>,
+    pose: Vec<HeadPose>,
+    offset: Vec<crate::sim::geom::V3>,
+}
+
+/// Drives the neck with the rows' `pose_Rx, pose_Ry, pose_Rz` (frames `dt` apart) under the
+/// run's learned voluntary controller (`voluntary.safetensors`) from the upright rest posture.
+fn drive_neck(
+    opts: &TransferOptions,
+    spec: &crate::spec::Spec,
+    rows: &[FaceRow],
+    dt: f64,
+) -> Result<HeadTrack> {
+    let weights = opts.model.join("voluntary.safetensors");
+    let bytes = std::fs::read(&weights).with_context(|| {
+        format!(
+            "{}: the input has head pose (pose_Rx, pose_Ry, pose_Rz) but the run has no \
+             voluntary neck controller (run a spec whose tables list \"headpose\", e.g. \
+             experiments/paper.toml, or pass --ignore-pose)",
+            weights.display()
+        )
+    })?;
+    let mlp = Mlp::from_safetensors(&bytes).with_context(|| format!("{}", weights.display()))?;
+    let neck = spec.headpose.neck();
+    let targets = PoseSequence {
+        fps: 1.0 / dt,
+        poses: rows
+            .iter()
+            .map(|r| {
+                let p = r.pose.expect("checked by the caller");
+                HeadPose {
+                    pitch: p[3],
+                    yaw: p[4],
+                    roll: p[5],
+                }
+            })
+            .collect(),
+    };
+    let (targets, warnings) = targets.checked(&neck).map_err(|e| match e {
+        NeckError::NotANumber { frame, what } => anyhow::anyhow!(
+            "{}: frame {}: head pose {what} is not a number",
+            opts.openface.display(),
+            rows[frame].frame
+        ),
+        other => other.into(),
+    })?;
+    for w in warnings.iter().take(5) {
+        eprintln!("warning: {}: {w}", opts.openface.display());
+    }
+    if warnings.len() > 5 {
+        eprintln!(
+            "warning: {}: {} more frames clamped",
+            opts.openface.display(),
+            warnings.len() - 5
+        );
+    }
+    // Sampled at 400 Hz; each frame takes the nearest sample.
+    let every = 10;
+    let duration = rows.len() as f64 * dt;
+    let run = simulate(
+        &neck,
+        &mut Learned { mlp: &mlp },
+        &targets,
+        BodyState::rest(),
+        duration,
+        every,
+    )
+    .with_context(|| format!("{}: driving the neck", opts.openface.display()))?;
+    let rate = neck.params.simulation_rate / every as f64;
+    let pick = |i: usize| ((i as f64 * dt * rate).round() as usize).min(run.time.len() - 1);
+    Ok(HeadTrack {
+        target: targets.poses.clone(),
+        pose: (0..rows.len()).map(|i| run.pose[pick(i)]).collect(),
+        offset: (0..rows.len()).map(|i| run.skull_offset[pick(i)]).collect(),
     })
 }

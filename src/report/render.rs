@@ -29,6 +29,17 @@ impl Camera {
         }
     }
 
+    /// A frontal view wide enough for the head turned +-40 degrees and carried by the neck
+    /// (its condyles move a few centimetres).
+    pub fn head_motion() -> Camera {
+        Camera {
+            eye: [0.0, -0.02, 0.85],
+            target: [0.0, -0.03, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_degrees: 26.0,
+        }
+    }
+
     /// A three-quarter view from the subject's left (the viewer's right).
     pub fn three_quarter() -> Camera {
         Camera {

@@ -487,7 +487,9 @@ fn read_headpose(r: &mut Reader) -> Result<HeadposeParams, SpecError> {
     let positive =
         |v: f64| (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"));
     let degrees = |limit: f64| {
-        move |v: f64| (!(v >= 0.0 && v <= limit)).then(|| format!("= {v} must lie in [0, {limit}]"))
+        move |v: f64| {
+            (!(0.0..=limit).contains(&v)).then(|| format!("= {v} must lie in [0, {limit}]"))
+        }
     };
     Ok(HeadposeParams {
         seed: r.integer("headpose.seed", d.seed as i64, 0, i64::MAX)? as u64,
@@ -524,11 +526,11 @@ fn read_headpose(r: &mut Reader) -> Result<HeadposeParams, SpecError> {
             r.float("headpose.roll_degrees", d.range_degrees[2], &degrees(30.0))?,
         ],
         duration: r.float("headpose.duration", d.duration, &|v| {
-            (!(v >= 0.6 && v <= 60.0)).then(|| format!("= {v} must lie in [0.6, 60] s"))
+            (!(0.6..=60.0).contains(&v)).then(|| format!("= {v} must lie in [0.6, 60] s"))
         })?,
         settle_degrees: r.float("headpose.settle_degrees", d.settle_degrees, &positive)?,
         sequence_seconds: r.float("headpose.sequence_seconds", d.sequence_seconds, &|v| {
-            (!(v >= 1.0 && v <= 60.0)).then(|| format!("= {v} must lie in [1, 60] s"))
+            (!(1.0..=60.0).contains(&v)).then(|| format!("= {v} must lie in [1, 60] s"))
         })?,
         reflex: crate::sim::neck::ReflexParams {
             strain_gain: r.float("headpose.strain_gain", d.reflex.strain_gain, &|v| {

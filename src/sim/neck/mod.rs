@@ -753,6 +753,8 @@ pub struct Trajectory {
     pub pose: Vec<HeadPose>,
     /// Mean applied activation over the muscles at each sample.
     pub effort: Vec<f64>,
+    /// The skull joint's displacement from its rest position at each sample (m).
+    pub skull_offset: Vec<V3>,
     /// One per clamped target frame.
     pub warnings: Vec<String>,
     pub final_state: BodyState,
@@ -779,9 +781,11 @@ pub fn simulate(
         target: Vec::new(),
         pose: Vec::new(),
         effort: Vec::new(),
+        skull_offset: Vec::new(),
         warnings,
         final_state: BodyState::rest(),
     };
+    let rest = neck.skeleton.frames(&BodyState::rest()).origin[SKULL];
     let mut command = Command::passive();
     for n in 0..steps {
         let t = n as f64 * h;
@@ -791,7 +795,13 @@ pub fn simulate(
         }
         let report = neck.step(&mut s, &command, true, t)?;
         if (n + 1) % every == 0 {
-            let seen = neck.observe(&s);
+            let f = neck.skeleton.frames(&s);
+            let seen = Observation {
+                pose: neck.head_pose(&f),
+                velocity: f.omega[SKULL],
+            };
+            out.skull_offset
+                .push(std::array::from_fn(|k| f.origin[SKULL][k] - rest[k]));
             out.time.push(t + h);
             out.target.push(targets.at(t + h));
             out.pose.push(seen.pose);

@@ -1,0 +1,202 @@
+//! The head-neck experiment end to end (`experiments/headpose.toml`, shrunk) and `facelab
+//! transfer` driving the neck with OpenFace head pose.
+
+use std::path::{Path, PathBuf};
+
+use crate::{facelab, root};
+
+fn temp(name: &str) -> PathBuf {
+    crate::temp("neck", name)
+}
+
+/// A small headpose run: few fits, two epochs, short simulations over a narrow range.
+fn tiny_run(results: &Path, threads: &str) -> std::process::Output {
+    facelab(&[
+        "run",
+        "experiments/headpose.toml",
+        "--results",
+        results.to_str().unwrap(),
+        "--threads",
+        threads,
+        "--set",
+        "headpose.fit_targets=6",
+        "--set",
+        "headpose.poses_per_target=2",
+        "--set",
+        "headpose.epochs=2",
+        "--set",
+        "headpose.layers=1",
+        "--set",
+        "headpose.width=8",
+        "--set",
+        "headpose.duration=1",
+        "--set",
+        "headpose.sequence_seconds=1",
+        "--set",
+        "headpose.pitch_degrees=8",
+        "--set",
+        "headpose.yaw_degrees=10",
+        "--set",
+        "headpose.roll_degrees=6",
+    ])
+}
+
+#[test]
+fn headpose_spec_writes_its_tables_and_figures_identically_on_any_thread_count() {
+    let (one, two) = (temp("one"), temp("two"));
+    let a = tiny_run(&one.join("results"), "1");
+    assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
+    let b = tiny_run(&two.join("results"), "2");
+    assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
+    for name in [
+        "headpose_static.csv",
+        "headpose_sequences.csv",
+        "headpose_trajectories.csv",
+        "headpose_curves.csv",
+        "voluntary.safetensors",
+    ] {
+        let read =
+            |root: &Path| std::fs::read(root.join("results/headpose/latest").join(name)).unwrap();
+        assert_eq!(
+            read(&one),
+            read(&two),
+            "{name} differs between 1 and 2 threads"
+        );
+    }
+    let statics =
+        std::fs::read_to_string(one.join("results/headpose/latest/headpose_static.csv")).unwrap();
+    // 27 targets for each of the two controllers, plus the header.
+    assert_eq!(statics.lines().count(), 1 + 2 * 27);
+    let table = std::fs::read_to_string(one.join("paper-tables/headpose.md")).unwrap();
+    assert!(table.contains("| teacher | 27 |"), "{table}");
+    for figure in [
+        "hill_curves",
+        "static_teacher",
+        "static_learned",
+        "sequences",
+        "face_poses",
+    ] {
+        let png = one.join(format!("figures/headpose/{figure}.png"));
+        assert!(image::open(&png).is_ok(), "{} is not a PNG", png.display());
+    }
+    // The teacher holds every target of the narrow grid within 2 degrees.
+    for line in statics.lines().skip(1).filter(|l| l.starts_with("teacher")) {
+        let late_max: f64 = line.split(',').nth(5).unwrap().parse().unwrap();
+        assert!(late_max < 2.0, "{line}");
+    }
+}
+
+/// A run folder with the committed paper network and the committed headpose controller.
+fn run_with_neck(dir: &Path) -> PathBuf {
+    let run = dir.join("run");
+    std::fs::create_dir_all(&run).unwrap();
+    let paper = root().join("results/paper/latest");
+    for name in ["unified.safetensors", "training_aus.csv", "spec.toml"] {
+        std::fs::copy(paper.join(name), run.join(name)).unwrap();
+    }
+    std::fs::copy(
+        root().join("results/headpose/latest/voluntary.safetensors"),
+        run.join("voluntary.safetensors"),
+    )
+    .unwrap();
+    run
+}
+
+/// A neutral face turning its head: yaw sweeps to `yaw_degrees`, pitch nods a little.
+fn turning_file(dir: &Path, frames: usize, yaw_degrees: f64, nan_frame: Option<usize>) -> PathBuf {
+    let aus = facelab::observe::AU_NAMES;
+    let mut text = String::from("frame, timestamp, confidence, success, pose_Tx, pose_Ty, pose_Tz, pose_Rx, pose_Ry, pose_Rz");
+    for a in aus {
+        text.push_str(&format!(", {a}_r"));
+    }
+    text.push('\n');
+    for f in 0..frames {
+        let t = f as f64 / (frames - 1) as f64;
+        let yaw = (yaw_degrees * t).to_radians();
+        let pitch = if nan_frame == Some(f) {
+            "nan".to_string()
+        } else {
+            format!("{:.4}", (8.0 * t).to_radians())
+        };
+        text.push_str(&format!(
+            "{}, {:.3}, 0.98, 1, 0.0, 0.0, 500.0, {pitch}, {yaw:.4}, 0.0",
+            f + 1,
+            f as f64 / 30.0
+        ));
+        for _ in aus {
+            text.push_str(", 0.05");
+        }
+        text.push('\n');
+    }
+    let path = dir.join("turning.csv");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn transfer(input: &Path, run: &Path, out: &Path) -> std::process::Output {
+    facelab(&[
+        "transfer",
+        "--openface",
+        input.to_str().unwrap(),
+        "--model",
+        run.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn transfer_drives_the_neck_with_the_files_head_pose() {
+    let dir = temp("transfer");
+    let run = run_with_neck(&dir);
+    let input = turning_file(&dir, 30, 25.0, None);
+    let out = dir.join("out");
+    let o = transfer(&input, &run, &out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let rms: f64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("head pose through the neck: RMS error "))
+        .and_then(|l| l.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no head pose line in {stdout}"));
+    // The head starts upright and follows a 25-degree turn within a second.
+    assert!(rms < 6.0, "{stdout}");
+    let head = std::fs::read_to_string(out.join("head_pose.csv")).unwrap();
+    assert_eq!(head.lines().count(), 31);
+    let transferred = std::fs::read_to_string(out.join("transferred.csv")).unwrap();
+    assert!(transferred.lines().next().unwrap().contains("pose_Ry"));
+    // The last frame's achieved yaw is near the target's.
+    let last: Vec<f64> = head
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|c| c.parse().unwrap())
+        .collect();
+    assert!((last[5] - last[2]).abs().to_degrees() < 3.0, "{last:?}");
+}
+
+#[test]
+fn transfer_clamps_poses_beyond_the_range_and_names_a_nan_frame() {
+    let dir = temp("bad_pose");
+    let run = run_with_neck(&dir);
+    let wide = turning_file(&dir, 6, 70.0, None);
+    let o = transfer(&wide, &run, &dir.join("wide"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("clamped") && stderr.contains("yaw 70.0 -> 50.0"),
+        "{stderr}"
+    );
+
+    let nan = turning_file(&dir, 6, 10.0, Some(3));
+    let o = transfer(&nan, &run, &dir.join("nan"));
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("frame 4: head pose pitch is not a number"),
+        "{stderr}"
+    );
+    assert!(!dir.join("nan/transferred.csv").exists());
+}
