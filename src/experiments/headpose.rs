@@ -3,7 +3,8 @@
 //! static targets across the range and of pose sequences, the Hill curves (paper Fig. 7),
 //! and the face riding on the simulated skull (paper Fig. 4).
 //!
-//! Training data: targets drawn uniformly in `headpose.range_degrees`; for each, the teacher's
+//! Training data: targets drawn uniformly in 1.15 times the evaluated range (within the
+//! neck's commanded range); for each, the teacher's
 //! equilibrium fit (`Neck::fit`, the activations and strains that hold it); for each target
 //! `poses_per_target` current poses and velocities drawn around it, labelled with the
 //! teacher's command (`Teacher::command_for`). The network maps (pose, velocity, target) to
@@ -30,11 +31,32 @@ use crate::sim::neck::{
 use crate::sim::{FaceModel, State};
 
 /// Bump when the data, training or evaluation change meaning.
-const HEADPOSE_VERSION: u32 = 2;
+const HEADPOSE_VERSION: u32 = 4;
+/// The spec keys the data stage reads (its targets, poses and split).
+const DATA_KEYS: [&str; 7] = [
+    "headpose.seed",
+    "headpose.fit_targets",
+    "headpose.poses_per_target",
+    "headpose.test_fraction",
+    "headpose.pitch_degrees",
+    "headpose.yaw_degrees",
+    "headpose.roll_degrees",
+];
+/// The spec keys the training stage reads (besides its data).
+const TRAIN_KEYS: [&str; 6] = [
+    "headpose.seed",
+    "headpose.layers",
+    "headpose.width",
+    "headpose.learning_rate",
+    "headpose.batch_size",
+    "headpose.epochs",
+];
 /// Strains are scaled by this in the network's outputs so that they weigh like activations.
 const STRAIN_SCALE: f64 = 10.0;
 const INPUTS: usize = 9;
 const OUTPUTS: usize = 3 * MUSCLES;
+/// Training targets are drawn in this multiple of the evaluated range.
+const TARGET_MARGIN: f64 = 1.15;
 /// Samples per second in the trajectories.
 const SAMPLE_RATE: f64 = 100.0;
 
@@ -51,7 +73,7 @@ pub struct HeadposeParams {
     pub test_fraction: f64,
     /// Hidden layers and width of the controller network. Default 4 x 100 (as the face's).
     pub model: ModelParams,
-    /// Adam. Default lr 1e-3, batch 64, 300 epochs, z-score inputs.
+    /// Adam. Default lr 1e-3, batch 64, 1000 epochs, z-score inputs.
     pub train: TrainParams,
     /// Pitch, yaw, roll range of the targets (degrees, one direction). Default (30, 40, 20).
     pub range_degrees: V3,
@@ -76,7 +98,7 @@ impl Default for HeadposeParams {
             train: TrainParams {
                 learning_rate: 1e-3,
                 batch_size: 64,
-                epochs: 300,
+                epochs: 1000,
                 normalization: Normalization::ZScore,
             },
             range_degrees: [30.0, 40.0, 20.0],
@@ -163,9 +185,13 @@ pub fn dataset(
     p: &HeadposeParams,
     tick: &(dyn Fn() + Sync),
 ) -> Result<(Pairs, Pairs, usize)> {
+    // Targets reach a little beyond the evaluated range (within the neck's commanded range)
+    // so that its corners are inside the data rather than on its edge.
+    let limit = neck.params.range_degrees;
+    let wide: V3 = std::array::from_fn(|k| (TARGET_MARGIN * p.range_degrees[k]).min(limit[k]));
     let mut rng = stream(p.seed, "headpose/targets");
     let targets: Vec<HeadPose> = (0..p.fit_targets)
-        .map(|_| uniform_pose(&mut rng, p.range_degrees))
+        .map(|_| uniform_pose(&mut rng, wide))
         .collect();
     let rows: Vec<(Vec<f32>, Vec<f32>, bool)> = targets
         .par_iter()
@@ -177,7 +203,7 @@ pub fn dataset(
             let mut rng = stream(p.seed, &format!("headpose/poses/{i}"));
             let (mut x, mut y) = (Vec::new(), Vec::new());
             for _ in 0..p.poses_per_target {
-                let pose = uniform_pose(&mut rng, p.range_degrees);
+                let pose = uniform_pose(&mut rng, wide);
                 let velocity = [0.5 * rng.normal(), 0.5 * rng.normal(), 0.5 * rng.normal()];
                 let seen = Observation { pose, velocity };
                 let c = Teacher::command_for(neck, pose, target, &fit)?;
@@ -360,8 +386,9 @@ pub fn stage(
 ) -> Result<Output> {
     let p = &spec.headpose;
     let neck = p.neck();
-    let values = super::run::values_text(spec, &["headpose."]);
-    let data_key = crate::cache::key("headpose_data", HEADPOSE_VERSION, &values, &[]);
+    // Each stage hashes only the keys it reads: retraining never re-fits.
+    let data_values = super::run::values_text(spec, &DATA_KEYS);
+    let data_key = crate::cache::key("headpose_data", HEADPOSE_VERSION, &data_values, &[]);
     let t = Instant::now();
     let (train_pairs, test_pairs, missed) = match cache.get("headpose_data", &data_key)? {
         Some(e) => {
@@ -401,7 +428,13 @@ pub fn stage(
             (train, test, missed)
         }
     };
-    let train_key = crate::cache::key("headpose_train", HEADPOSE_VERSION, &values, &[&data_key]);
+    let train_values = super::run::values_text(spec, &TRAIN_KEYS);
+    let train_key = crate::cache::key(
+        "headpose_train",
+        HEADPOSE_VERSION,
+        &train_values,
+        &[&data_key],
+    );
     let t = Instant::now();
     let (mlp, curves) = match cache.get("headpose_train", &train_key)? {
         Some(e) => {

@@ -294,6 +294,22 @@ fn load_basis(
     Ok(Some(b))
 }
 
+/// A stage's record keeper for `cell`: (stage, key, cache hit, start time).
+fn recorder<'a>(
+    cell: &'a str,
+    records: &'a mut Vec<StageRecord>,
+) -> impl FnMut(&str, &str, bool, Instant) + 'a {
+    move |stage, key, hit, t| {
+        records.push(StageRecord {
+            cell: cell.into(),
+            stage: stage.into(),
+            key: key.into(),
+            hit,
+            seconds: t.elapsed().as_secs_f64(),
+        })
+    }
+}
+
 fn run_cell(
     cell: &Cell,
     a: &Assets,
@@ -302,15 +318,7 @@ fn run_cell(
 ) -> Result<CellResult> {
     let spec = &cell.spec;
     let k = keys(spec, a);
-    let mut record = |stage: &str, key: &str, hit: bool, t: Instant| {
-        records.push(StageRecord {
-            cell: cell.name.clone(),
-            stage: stage.into(),
-            key: key.into(),
-            hit,
-            seconds: t.elapsed().as_secs_f64(),
-        })
-    };
+    let mut record = recorder(&cell.name, records);
     let source = FaceSource {
         subdivisions: spec.dataset.subdivisions,
         ..FaceSource::default()
@@ -739,15 +747,7 @@ fn headpose_outputs(
     write: &mut dyn FnMut(String, Vec<u8>) -> Result<()>,
 ) -> Result<()> {
     let spec = &cell.spec;
-    let mut record = |stage: &str, key: &str, hit: bool, t: Instant| {
-        records.push(StageRecord {
-            cell: cell.name.clone(),
-            stage: stage.into(),
-            key: key.into(),
-            hit,
-            seconds: t.elapsed().as_secs_f64(),
-        })
-    };
+    let mut record = recorder(&cell.name, records);
     let out = headpose::stage(spec, cache, &mut record, &bar)?;
     write(
         format!("{prefix}headpose_static.csv"),
