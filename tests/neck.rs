@@ -193,9 +193,10 @@ fn transfer_clamps_poses_beyond_the_range_and_names_a_nan_frame() {
     let nan = turning_file(&dir, 6, 10.0, Some(3));
     let o = transfer(&nan, &run, &dir.join("nan"));
     assert!(!o.status.success());
+    // The reader already refuses it, naming the file's line (frame 4 is line 5).
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(
-        stderr.contains("frame 4: head pose pitch is not a number"),
+        stderr.contains("turning.csv:5: column `pose_Rx` is NaN"),
         "{stderr}"
     );
     assert!(!dir.join("nan/transferred.csv").exists());
