@@ -219,9 +219,13 @@ impl Neck {
     }
 
     pub fn observe(&self, s: &BodyState) -> Observation {
-        let f = self.skeleton.frames(s);
+        self.observation(&self.skeleton.frames(s))
+    }
+
+    /// What the voluntary controller sees in the posture `f`.
+    pub fn observation(&self, f: &Frames) -> Observation {
         Observation {
-            pose: self.head_pose(&f),
+            pose: self.head_pose(f),
             velocity: f.omega[SKULL],
         }
     }
@@ -460,14 +464,18 @@ impl Neck {
                 solve_dense(&n, DOF, &m_qt, ROWS).ok_or_else(|| NeckError::Equilibrium {
                     reason: "singular posture system".into(),
                 })?;
-            let project = |v: &[f64]| -> Vec<f64> {
-                let y: Vec<f64> = (0..DOF)
+            // The posture step that best absorbs a residual v: N^-1 M_q^T v.
+            let posture_step = |v: &[f64]| -> Vec<f64> {
+                (0..DOF)
                     .map(|i| {
                         (0..ROWS)
                             .map(|row| n_inv_mqt[i * ROWS + row] * v[row])
                             .sum()
                     })
-                    .collect();
+                    .collect()
+            };
+            let project = |v: &[f64]| -> Vec<f64> {
+                let y = posture_step(v);
                 (0..ROWS)
                     .map(|row| v[row] - (0..DOF).map(|i| m_q[row * DOF + i] * y[i]).sum::<f64>())
                     .collect()
@@ -495,13 +503,7 @@ impl Neck {
                             .sum::<f64>()
                 })
                 .collect();
-            let dq: Vec<f64> = (0..DOF)
-                .map(|i| {
-                    (0..ROWS)
-                        .map(|row| n_inv_mqt[i * ROWS + row] * rest[row])
-                        .sum()
-                })
-                .collect();
+            let dq = posture_step(&rest);
             let mut accepted = false;
             let mut t = 1.0;
             while t > 0.1 {
@@ -796,10 +798,7 @@ pub fn simulate(
         let report = neck.step(&mut s, &command, true, t)?;
         if (n + 1) % every == 0 {
             let f = neck.skeleton.frames(&s);
-            let seen = Observation {
-                pose: neck.head_pose(&f),
-                velocity: f.omega[SKULL],
-            };
+            let seen = neck.observation(&f);
             out.skull_offset
                 .push(std::array::from_fn(|k| f.origin[SKULL][k] - rest[k]));
             out.time.push(t + h);
