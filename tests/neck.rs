@@ -186,7 +186,9 @@ fn transfer_clamps_poses_beyond_the_range_and_names_a_nan_frame() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(
-        stderr.contains("clamped") && stderr.contains("yaw 70.0 -> 50.0"),
+        stderr.contains("clamped")
+            && stderr.contains("frame 6: ")
+            && stderr.contains("yaw 70.0 -> 50.0"),
         "{stderr}"
     );
 

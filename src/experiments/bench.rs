@@ -561,7 +561,7 @@ pub fn bench_neck(seconds: f64, out: &mut impl Write) -> Result<()> {
     ];
     let t = Instant::now();
     for d in fits {
-        neck.fit(HeadPose::from_degrees(d[0], d[1], d[2]), None)?;
+        neck.fit(HeadPose::from_degrees(d[0], d[1], d[2]))?;
     }
     line(
         out,

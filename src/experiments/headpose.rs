@@ -198,7 +198,7 @@ pub fn dataset(
         .enumerate()
         .map(|(i, &target)| -> Result<(Vec<f32>, Vec<f32>, bool)> {
             let fit = neck
-                .fit(target, None)
+                .fit(target)
                 .with_context(|| format!("fitting target {:?} (degrees)", target.degrees()))?;
             let mut rng = stream(p.seed, &format!("headpose/poses/{i}"));
             let (mut x, mut y) = (Vec::new(), Vec::new());

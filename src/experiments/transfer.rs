@@ -24,7 +24,7 @@ use crate::report::compose::gif_bytes;
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::controls::control_names;
-use crate::sim::neck::{simulate, BodyState, HeadPose, NeckError, PoseSequence};
+use crate::sim::neck::{simulate, BodyState, HeadPose, PoseSequence};
 use crate::sim::{solve_from_rest, SolveParams, Workspace};
 
 #[derive(Clone, Debug)]
@@ -366,22 +366,22 @@ fn drive_neck(
             })
             .collect(),
     };
-    let (targets, warnings) = targets.checked(&neck).map_err(|e| match e {
-        NeckError::NotANumber { frame, what } => anyhow::anyhow!(
-            "{}: frame {}: head pose {what} is not a number",
+    // The reader refuses NaN cells, naming the line; clamped frames are named as the file does.
+    let (targets, clamped) = targets
+        .checked(&neck)
+        .with_context(|| format!("{}: head pose", opts.openface.display()))?;
+    for (i, w) in clamped.iter().take(5) {
+        eprintln!(
+            "warning: {}: frame {}: {w}",
             opts.openface.display(),
-            rows[frame].frame
-        ),
-        other => other.into(),
-    })?;
-    for w in warnings.iter().take(5) {
-        eprintln!("warning: {}: {w}", opts.openface.display());
+            rows[*i].frame
+        );
     }
-    if warnings.len() > 5 {
+    if clamped.len() > 5 {
         eprintln!(
             "warning: {}: {} more frames clamped",
             opts.openface.display(),
-            warnings.len() - 5
+            clamped.len() - 5
         );
     }
     // Sampled at 400 Hz; each frame takes the nearest sample.

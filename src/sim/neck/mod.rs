@@ -352,15 +352,12 @@ impl Neck {
         q: &[f64; DOF],
         a: &[f64],
         g: &[f64; DOF],
-        reference: Option<&Rot3>,
+        reference: &Rot3,
+        e0: V3,
     ) -> (Vec<f64>, Vec<f64>) {
         const H: f64 = 1e-7;
         let mut k = vec![0.0; DOF * DOF];
         let mut jh = vec![0.0; 3 * DOF];
-        let base = reference.map(|r| {
-            let (_, head, _) = self.static_force(q, a);
-            r.mul(&head).log()
-        });
         for c in 0..DOF {
             let mut p = *q;
             p[c] += H;
@@ -368,11 +365,9 @@ impl Neck {
             for r in 0..DOF {
                 k[r * DOF + c] = -(gp[r] - g[r]) / H;
             }
-            if let (Some(r), Some(e0)) = (reference, base) {
-                let e = r.mul(&head).log();
-                for row in 0..3 {
-                    jh[row * DOF + c] = (e[row] - e0[row]) / H;
-                }
+            let e = reference.mul(&head).log();
+            for row in 0..3 {
+                jh[row * DOF + c] = (e[row] - e0[row]) / H;
             }
         }
         (k, jh)
@@ -388,14 +383,13 @@ impl Neck {
     /// hold a pose; the ridge picks the least effort. The posture is a free unknown, so the
     /// fit never has to follow the passive neck's folding equilibrium branches; the
     /// equilibrium need not be passively stable, since the reflex stiffens it.
-    /// `warm` starts from an earlier fit instead of rest.
-    pub fn fit(&self, target: HeadPose, warm: Option<&Fit>) -> Result<Fit, NeckError> {
+    pub fn fit(&self, target: HeadPose) -> Result<Fit, NeckError> {
         let prior = self.posture(target)?.angles();
         let w_p = self.params.posture_weight;
         let lambda = self.params.effort_weight;
         let goal = target.rotation().transpose();
-        let mut a = warm.map_or(vec![0.0; MUSCLES], |w| w.activation.clone());
-        let mut q = warm.map_or(prior, |w| w.angles);
+        let mut a = vec![0.0; MUSCLES];
+        let mut q = prior;
         const ROWS: usize = 2 * DOF + 3;
         // The scaled residual [s_G G; s_h e; w_p (q - prior)] and the objective.
         let evaluate = |q: &[f64; DOF], a: &[f64]| {
@@ -407,15 +401,15 @@ impl Neck {
             r.extend((0..DOF).map(|i| w_p * (q[i] - prior[i])));
             let phi = r.iter().map(|v| v * v).sum::<f64>()
                 + lambda * a.iter().map(|v| v * v).sum::<f64>();
-            (r, g, ms, phi)
+            (r, g, e, ms, phi)
         };
-        let (mut r, mut g, mut ms, mut phi) = evaluate(&q, &a);
+        let (mut r, mut g, mut e, mut ms, mut phi) = evaluate(&q, &a);
         let mut iterations = 0;
         // Levenberg-Marquardt damping, raised when a step fails.
         let mut mu = 0.0f64;
         while iterations < 80 {
             iterations += 1;
-            let (k, jh) = self.stiffness(&q, &a, &g, Some(&goal));
+            let (k, jh) = self.stiffness(&q, &a, &g, &goal, e);
             // Linearized residual M_a a' + M_q dq - d.
             let hill = &self.params.hill;
             let mut m_a = vec![0.0; ROWS * MUSCLES];
@@ -513,10 +507,10 @@ impl Neck {
                     .zip(&proposal)
                     .map(|(x, p)| x + t * (p - x))
                     .collect();
-                let (rt, gt, mst, phit) = evaluate(&qt, &at);
+                let (rt, gt, et, mst, phit) = evaluate(&qt, &at);
                 if phit < phi {
                     let gain = phi - phit;
-                    (q, a, r, g, ms, phi) = (qt, at, rt, gt, mst, phit);
+                    (q, a, r, g, e, ms, phi) = (qt, at, rt, gt, et, mst, phit);
                     accepted = true;
                     if gain < 1e-7 * phi {
                         iterations = usize::MAX - 1;
@@ -689,7 +683,7 @@ impl Voluntary for Teacher {
     ) -> Result<Command, NeckError> {
         let fit = match self.last.take() {
             Some((t, fit)) if t == target => fit,
-            _ => neck.fit(target, None)?,
+            _ => neck.fit(target)?,
         };
         let command = Teacher::command_for(neck, seen.pose, target, &fit)?;
         self.last = Some((target, fit));
@@ -718,9 +712,9 @@ impl PoseSequence {
         self.poses[k.min(self.poses.len() - 1)]
     }
 
-    /// The sequence with every pose inside the neck's commanded range, and one warning per
-    /// clamped frame; a NaN pose is an error naming its frame (0-based).
-    pub fn checked(&self, neck: &Neck) -> Result<(PoseSequence, Vec<String>), NeckError> {
+    /// The sequence with every pose inside the neck's commanded range, and for each clamped
+    /// frame (0-based) what was clamped; a NaN pose is an error naming its frame.
+    pub fn checked(&self, neck: &Neck) -> Result<(PoseSequence, Vec<(usize, String)>), NeckError> {
         let mut warnings = Vec::new();
         let mut poses = Vec::with_capacity(self.poses.len());
         for (frame, p) in self.poses.iter().enumerate() {
@@ -733,7 +727,7 @@ impl PoseSequence {
             }
             let (clamped, warning) = neck.clamp_target(*p);
             if let Some(w) = warning {
-                warnings.push(format!("frame {frame}: {w}"));
+                warnings.push((frame, w));
             }
             poses.push(clamped);
         }
@@ -773,7 +767,11 @@ pub fn simulate(
     duration: f64,
     every: usize,
 ) -> Result<Trajectory, NeckError> {
-    let (targets, warnings) = targets.checked(neck)?;
+    let (targets, clamped) = targets.checked(neck)?;
+    let warnings = clamped
+        .into_iter()
+        .map(|(frame, w)| format!("frame {frame}: {w}"))
+        .collect();
     let h = neck.time_step();
     let steps = (duration / h).round() as usize;
     let per_command = neck.steps_per_command();
@@ -1007,7 +1005,7 @@ mod tests {
         let (clamped, warnings) = seq.checked(&neck).unwrap();
         assert_eq!(warnings.len(), 1);
         assert!(
-            warnings[0].contains("frame 1") && warnings[0].contains("yaw 80.0 -> 50.0"),
+            warnings[0].0 == 1 && warnings[0].1.contains("yaw 80.0 -> 50.0"),
             "{warnings:?}"
         );
         assert!((clamped.poses[1].degrees()[1] - 50.0).abs() < 1e-9);
@@ -1038,7 +1036,7 @@ mod tests {
     fn fit_holds_the_target_at_equilibrium() {
         let neck = Neck::new(NeckParams::default());
         let target = HeadPose::from_degrees(-20.0, 25.0, 10.0);
-        let fit = neck.fit(target, None).unwrap();
+        let fit = neck.fit(target).unwrap();
         assert!(fit.error_degrees < 0.1, "{fit:?}");
         assert!(fit.activation.iter().all(|a| (0.0..=1.0).contains(a)));
         // Released at the fitted posture with the fitted activations, it stays.
