@@ -1,12 +1,14 @@
 //! Physics of the face model: the checks of issue 2.
 
+use facelab::experiments::bench::random_samples;
 use facelab::io::expressions::{default_expressions_path, read_expressions};
 use facelab::sim::expression::Expression;
 use facelab::sim::geom::{cross, dot, norm, sub, V3};
 use facelab::sim::solver::residual;
 use facelab::sim::tissue::{prism_volume, LIP_THICKNESS_SCALE};
 use facelab::sim::{
-    control_names, solve_from_rest, Activations, FaceModel, SolveParams, State, Workspace,
+    control_names, solve as solve_warm, solve_from_rest, Activations, FaceModel, SolveParams,
+    State, Workspace,
 };
 
 use super::model;
@@ -206,4 +208,22 @@ fn same_inputs_give_bit_identical_positions() {
     let bits =
         |s: &State| -> Vec<u64> { s.positions.iter().flatten().map(|c| c.to_bits()).collect() };
     assert_eq!(bits(&solve(&a)), bits(&solve(&a)));
+}
+
+/// `bench solve`'s warm sequence (seed 1) from sample 19 to sample 20 buckles the lips on
+/// the way: the semi-definite Newton circled just above tolerance on every piece of the
+/// path, and the solve failed until the shifted exact Hessian took over.
+#[test]
+fn warm_solve_through_a_buckled_path_converges() {
+    let m = model();
+    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let samples = random_samples(&weights, 1, 21);
+    let params = SolveParams::default();
+    let mut ws = Workspace::new(m);
+    let (mut state, _) = solve_from_rest(m, &samples[19], &mut ws, &params).unwrap();
+    solve_warm(m, &samples[20], &mut state, &mut ws, &params)
+        .unwrap_or_else(|e| panic!("warm solve 19 -> 20: {e}"));
+    let r = residual(m, &state, &mut ws);
+    assert!(r <= params.tolerance, "residual {r:e}");
+    assert_eq!(state.activations, samples[20]);
 }

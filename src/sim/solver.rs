@@ -11,7 +11,11 @@
 //!
 //! Large changes of activation are reached by continuation: the path from the state's own
 //! activations to the target is split in halves until each piece converges, so a solve from
-//! rest follows the physical loading path and gives the same equilibrium every run.
+//! rest follows the physical loading path and gives the same equilibrium every run. If even
+//! the smallest piece fails (`max_halvings`), the rest of the path is followed once more with
+//! the exact Hessian shifted toward positive definiteness instead of its semi-definite part:
+//! slower per iteration, but it does not circle near buckled equilibria. Solves that converge
+//! without it are unchanged by it.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
@@ -35,14 +39,15 @@ use super::tissue::{prism_volume, prism_volume_derivatives};
 pub struct SolveParams {
     /// Converged when |gradient| <= tolerance * |gradient at the rest positions| for the same
     /// activations (the force imbalance the solve removes). Default 1e-4: `bench solve`
-    /// measures how far a 100x tighter solve moves the landmarks from there (about 0.02 mm
-    /// at most, against ~4 mm of expression motion).
+    /// measures how far a 100x tighter solve moves the landmarks from there: at most 0.25 mm
+    /// over its 60 random expressions, against a mean expression motion of 4.9 mm.
     pub tolerance: f64,
     /// Newton iterations allowed per continuation piece. Default 30.
     pub max_iterations: usize,
     /// Equal steps from rest in `solve_from_rest`. Default 4.
     pub continuation_steps: usize,
-    /// How many times a piece of the path may be halved before giving up. Default 6.
+    /// How many times a piece of the path may be halved before the rest of the path is tried
+    /// with the shifted exact Hessian, and then before giving up. Default 6.
     pub max_halvings: usize,
 }
 
@@ -651,16 +656,30 @@ fn gradient_norm(ws: &Workspace) -> f64 {
     ws.gradient.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
-/// Newton iterations at fixed `pose` from the positions in `state`.
 /// Force imbalance (N) below which a pose counts as unloaded.
 const NO_LOAD: f64 = 1e-9;
 
+/// What a Newton iteration does where the exact Hessian is indefinite.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Curvature {
+    /// Drop the compressive springs' geometric terms and the volume's second derivative (the
+    /// positive semi-definite part), then shift the diagonal if that is still singular. Cheap
+    /// and usually enough, but near a buckled equilibrium the stiffness it drops is the very
+    /// softness of the buckling mode, and the iteration can circle just above tolerance.
+    SemiDefinite,
+    /// Keep the exact Hessian and add the smallest power-of-ten multiple of the identity that
+    /// makes it positive definite (Levenberg), starting a tenth below the last shift.
+    Shifted,
+}
+
+/// Newton iterations at fixed `pose` from the positions in `state`.
 fn newton(
     model: &FaceModel,
     pose: &Pose,
     state: &mut State,
     ws: &mut Workspace,
     params: &SolveParams,
+    curvature: Curvature,
 ) -> Result<SolveReport, SolveError> {
     // Scale: the force imbalance of the rest positions under this pose.
     let rest = rest_under(model, pose);
@@ -682,6 +701,7 @@ fn newton(
         return Err(SolveError::InvalidStart);
     }
     let mut residual = f64::INFINITY;
+    let mut last_shift = 0.0f64;
     for iteration in 0..=params.max_iterations {
         assemble(model, pose, x, ws, true, true);
         residual = gradient_norm(ws) / scale_norm;
@@ -699,17 +719,21 @@ fn newton(
             break;
         }
         // Solve H s = -g with the full Hessian. Where it is indefinite (compressed springs,
-        // a prism past its volume's inflection), use the positive semi-definite part instead,
-        // and if that is singular, shift its diagonal until it factorises.
+        // a prism past its volume's inflection), fall back as `curvature` says.
         let mut full = true;
         let mut shift = 0.0;
         while !ws.newton_step() {
-            if full {
+            if full && curvature == Curvature::SemiDefinite {
                 full = false;
                 assemble(model, pose, x, ws, true, false);
                 continue;
             }
-            let next = if shift == 0.0 { 1e-3 } else { shift * 100.0 };
+            let next = match curvature {
+                Curvature::SemiDefinite if shift == 0.0 => 1e-3,
+                Curvature::SemiDefinite => shift * 100.0,
+                Curvature::Shifted if shift == 0.0 => (last_shift * 0.1).max(1e-3),
+                Curvature::Shifted => shift * 10.0,
+            };
             if next > 1e12 {
                 return Err(SolveError::NonFinite { iteration });
             }
@@ -720,6 +744,7 @@ fn newton(
             }
             shift = next;
         }
+        last_shift = shift;
         let slope: f64 = ws.step.iter().zip(&ws.gradient).map(|(s, g)| s * g).sum();
         // Backtracking (Armijo) line search on the energy.
         let mut alpha = 1.0;
@@ -772,13 +797,14 @@ pub fn solve(
     let mut t = 0.0f64;
     let mut piece = 1.0f64;
     let mut halvings = 0usize;
+    let mut curvature = Curvature::SemiDefinite;
     while t < 1.0 {
         let t_next = (t + piece).min(1.0);
         let a = interpolate(&start, target, t_next);
         let to_pose = model.pose(&a);
         let mut trial = state.clone();
         model.carry(&mut trial, &from_pose, &to_pose);
-        match newton(model, &to_pose, &mut trial, ws, params) {
+        match newton(model, &to_pose, &mut trial, ws, params, curvature) {
             Ok(r) => {
                 report.iterations += r.iterations;
                 report.pieces += 1;
@@ -789,6 +815,13 @@ pub fn solve(
             }
             Err(err) => {
                 halvings += 1;
+                if halvings > params.max_halvings && curvature == Curvature::SemiDefinite {
+                    // Follow the rest of the path again with the exact, shifted Hessian.
+                    curvature = Curvature::Shifted;
+                    halvings = 0;
+                    piece = 1.0 - t;
+                    continue;
+                }
                 if halvings > params.max_halvings {
                     return Err(match err {
                         SolveError::NotConverged { residual, .. } => SolveError::NotConverged {
@@ -860,7 +893,14 @@ pub fn solve_predicted(
         positions,
         activations: target.clone(),
     };
-    let spent = match newton(model, &pose, &mut state, ws, params) {
+    let spent = match newton(
+        model,
+        &pose,
+        &mut state,
+        ws,
+        params,
+        Curvature::SemiDefinite,
+    ) {
         Ok(report) => return Ok((state, report)),
         Err(SolveError::NotConverged { iterations, .. }) => iterations,
         Err(_) => 0,
