@@ -196,6 +196,10 @@ enum Command {
         /// they drive the neck, with the run's voluntary.safetensors)
         #[arg(long)]
         ignore_pose: bool,
+        /// Run folder with the neck's voluntary.safetensors and spec.toml, e.g.
+        /// results/headpose/latest [default: the --model folder]
+        #[arg(long, conflicts_with = "ignore_pose")]
+        neck: Option<PathBuf>,
         #[arg(long)]
         out: PathBuf,
     },
@@ -426,6 +430,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             normalize,
             frames,
             ignore_pose,
+            neck,
             out,
         } => {
             let summary = transfer::transfer_openface(&transfer::TransferOptions {
@@ -435,6 +440,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 out,
                 render_frames: frames,
                 ignore_pose,
+                neck,
             })?;
             if let Some((rms, max)) = summary.pose_error {
                 println!("head pose through the neck: RMS error {rms:.2} deg, max {max:.2} deg");

@@ -86,22 +86,6 @@ fn headpose_spec_writes_its_tables_and_figures_identically_on_any_thread_count()
     }
 }
 
-/// A run folder with the committed paper network and the committed headpose controller.
-fn run_with_neck(dir: &Path) -> PathBuf {
-    let run = dir.join("run");
-    std::fs::create_dir_all(&run).unwrap();
-    let paper = root().join("results/paper/latest");
-    for name in ["unified.safetensors", "training_aus.csv", "spec.toml"] {
-        std::fs::copy(paper.join(name), run.join(name)).unwrap();
-    }
-    std::fs::copy(
-        root().join("results/headpose/latest/voluntary.safetensors"),
-        run.join("voluntary.safetensors"),
-    )
-    .unwrap();
-    run
-}
-
 /// A neutral face turning its head: yaw sweeps to `yaw_degrees`, pitch nods a little.
 fn turning_file(dir: &Path, frames: usize, yaw_degrees: f64, nan_frame: Option<usize>) -> PathBuf {
     let aus = facelab::observe::AU_NAMES;
@@ -133,25 +117,39 @@ fn turning_file(dir: &Path, frames: usize, yaw_degrees: f64, nan_frame: Option<u
     path
 }
 
-fn transfer(input: &Path, run: &Path, out: &Path) -> std::process::Output {
-    facelab(&[
+/// `facelab transfer` with the network of the run folder `model` and the neck controller of
+/// the run folder `neck`, if any.
+fn transfer(input: &Path, model: &Path, neck: Option<&Path>, out: &Path) -> std::process::Output {
+    let mut args = vec![
         "transfer",
         "--openface",
         input.to_str().unwrap(),
         "--model",
-        run.to_str().unwrap(),
+        model.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
-    ])
+    ];
+    if let Some(n) = neck {
+        args.extend(["--neck", n.to_str().unwrap()]);
+    }
+    facelab(&args)
+}
+
+/// The committed paper network and headpose controller.
+fn committed() -> (PathBuf, PathBuf) {
+    (
+        root().join("results/paper/latest"),
+        root().join("results/headpose/latest"),
+    )
 }
 
 #[test]
 fn transfer_drives_the_neck_with_the_files_head_pose() {
     let dir = temp("transfer");
-    let run = run_with_neck(&dir);
     let input = turning_file(&dir, 30, 25.0, None);
     let out = dir.join("out");
-    let o = transfer(&input, &run, &out);
+    let (paper, neck) = committed();
+    let o = transfer(&input, &paper, Some(&neck), &out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let stdout = String::from_utf8_lossy(&o.stdout);
     let rms: f64 = stdout
@@ -180,9 +178,9 @@ fn transfer_drives_the_neck_with_the_files_head_pose() {
 #[test]
 fn transfer_clamps_poses_beyond_the_range_and_names_a_nan_frame() {
     let dir = temp("bad_pose");
-    let run = run_with_neck(&dir);
+    let (paper, neck) = committed();
     let wide = turning_file(&dir, 6, 70.0, None);
-    let o = transfer(&wide, &run, &dir.join("wide"));
+    let o = transfer(&wide, &paper, Some(&neck), &dir.join("wide"));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(
@@ -193,7 +191,7 @@ fn transfer_clamps_poses_beyond_the_range_and_names_a_nan_frame() {
     );
 
     let nan = turning_file(&dir, 6, 10.0, Some(3));
-    let o = transfer(&nan, &run, &dir.join("nan"));
+    let o = transfer(&nan, &paper, Some(&neck), &dir.join("nan"));
     assert!(!o.status.success());
     // The reader already refuses it, naming the file's line (frame 4 is line 5).
     let stderr = String::from_utf8_lossy(&o.stderr);
@@ -202,4 +200,29 @@ fn transfer_clamps_poses_beyond_the_range_and_names_a_nan_frame() {
         "{stderr}"
     );
     assert!(!dir.join("nan/transferred.csv").exists());
+}
+
+#[test]
+fn transfer_of_pose_without_a_neck_controller_says_where_one_is() {
+    let dir = temp("no_neck");
+    let input = turning_file(&dir, 4, 10.0, None);
+    // A run folder with the face network but no voluntary.safetensors.
+    let (paper, neck) = committed();
+    let face_only = dir.join("face_only");
+    std::fs::create_dir_all(&face_only).unwrap();
+    for name in ["unified.safetensors", "training_aus.csv", "spec.toml"] {
+        std::fs::copy(paper.join(name), face_only.join(name)).unwrap();
+    }
+    let o = transfer(&input, &face_only, None, &dir.join("out"));
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("face_only/voluntary.safetensors") && stderr.contains("--neck"),
+        "{stderr}"
+    );
+    assert!(!dir.join("out/transferred.csv").exists());
+    // The same folder with the neck taken from the headpose run.
+    let o = transfer(&input, &face_only, Some(&neck), &dir.join("out"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(dir.join("out/head_pose.csv").exists());
 }

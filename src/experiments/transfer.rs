@@ -38,6 +38,9 @@ pub struct TransferOptions {
     pub render_frames: Vec<i64>,
     /// Keep the head still although the file has pose.
     pub ignore_pose: bool,
+    /// A run folder with `voluntary.safetensors` and `spec.toml` (whose `[headpose]` gives the
+    /// neck the controller was trained on); `None`: `model`.
+    pub neck: Option<PathBuf>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -105,6 +108,15 @@ fn training_normalizer(path: &Path, kind: Normalization) -> Result<Normalizer> {
     Ok(Normalizer { offset, scale })
 }
 
+/// The spec a run folder was made with (its `spec.toml`).
+fn run_spec(run: &Path) -> Result<crate::spec::Spec> {
+    let path = run.join("spec.toml");
+    Ok(crate::spec::load(&path, &[])
+        .with_context(|| format!("{}: the run's spec", path.display()))?
+        .remove(0)
+        .spec)
+}
+
 /// Runs the transfer and writes `transferred.csv`, `activations.csv`, `mse.csv`, renders of
 /// the chosen frames and, for more than one frame, `transfer.gif`.
 pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
@@ -126,11 +138,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
             mlp.outputs
         );
     }
-    let spec_path = run.join("spec.toml");
-    let spec = crate::spec::load(&spec_path, &[])
-        .with_context(|| format!("{}: the run's spec", spec_path.display()))?
-        .remove(0)
-        .spec;
+    let spec = run_spec(run)?;
 
     let file = read_openface(&opts.openface)?;
     if file.rows.is_empty() {
@@ -333,25 +341,29 @@ struct HeadTrack {
     offset: Vec<crate::sim::geom::V3>,
 }
 
-/// Drives the neck with the rows' `pose_Rx, pose_Ry, pose_Rz` (frames `dt` apart) under the
-/// run's learned voluntary controller (`voluntary.safetensors`) from the upright rest posture.
+/// Drives the neck with the rows' `pose_Rx, pose_Ry, pose_Rz` (frames `dt` apart) under a
+/// run's learned voluntary controller (`voluntary.safetensors` of `opts.neck`, else of the
+/// face's run, whose spec is `spec`) from the upright rest posture.
 fn drive_neck(
     opts: &TransferOptions,
     spec: &crate::spec::Spec,
     rows: &[FaceRow],
     dt: f64,
 ) -> Result<HeadTrack> {
-    let weights = opts.model.join("voluntary.safetensors");
+    let (run, neck) = match &opts.neck {
+        Some(dir) => (dir, run_spec(dir)?.headpose.neck()),
+        None => (&opts.model, spec.headpose.neck()),
+    };
+    let weights = run.join("voluntary.safetensors");
     let bytes = std::fs::read(&weights).with_context(|| {
         format!(
             "{}: the input has head pose (pose_Rx, pose_Ry, pose_Rz) but the run has no \
-             voluntary neck controller (run a spec whose tables list \"headpose\", e.g. \
-             experiments/paper.toml, or pass --ignore-pose)",
+             voluntary neck controller (pass --neck with a run of a spec whose tables list \
+             \"headpose\", e.g. results/headpose/latest, or pass --ignore-pose)",
             weights.display()
         )
     })?;
     let mlp = Mlp::from_safetensors(&bytes).with_context(|| format!("{}", weights.display()))?;
-    let neck = spec.headpose.neck();
     let targets = PoseSequence {
         fps: 1.0 / dt,
         poses: rows
