@@ -592,12 +592,21 @@ impl Neck {
             let stiffness = force.stiffness + force.contractile * da_dl;
             let damping_d = force.damping + force.contractile * da_dv;
             let weight = h * damping_d + h * h * stiffness;
-            let nz: Vec<usize> = (0..DOF).filter(|&i| g.gradient[i] != 0.0).collect();
-            for &r in &nz {
+            // The joints the muscle spans (no allocation: this runs 72 times a step).
+            let mut nz = [0usize; DOF];
+            let mut count = 0;
+            for (i, &v) in g.gradient.iter().enumerate() {
+                if v != 0.0 {
+                    nz[count] = i;
+                    count += 1;
+                }
+            }
+            let nz = &nz[..count];
+            for &r in nz {
                 tau[r] -= total * g.gradient[r];
                 if weight != 0.0 {
                     let wr = weight * g.gradient[r];
-                    for &c in &nz {
+                    for &c in nz {
                         system[r * DOF + c] += wr * g.gradient[c];
                     }
                 }

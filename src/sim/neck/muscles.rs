@@ -174,23 +174,26 @@ pub struct Geometry {
 
 /// Length, rate and gradient of `path` in the posture `f`.
 pub fn geometry(path: &[Attachment], f: &Frames) -> Geometry {
-    let world: Vec<V3> = path.iter().map(|p| f.point(p.link, p.point)).collect();
     let mut g = Geometry {
         length: 0.0,
         rate: 0.0,
         gradient: [0.0; DOF],
     };
-    for s in 0..path.len() - 1 {
-        let (a, b) = (&path[s], &path[s + 1]);
-        let d = sub(world[s + 1], world[s]);
+    // World positions segment by segment (no allocation: the step calls this per muscle).
+    let mut from = f.point(path[0].link, path[0].point);
+    for pair in path.windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        let to = f.point(b.link, b.point);
+        let d = sub(to, from);
         let l = norm(d);
         g.length += l;
         let unit = scale(d, 1.0 / l);
-        let va = f.point_velocity(a.link, world[s]);
-        let vb = f.point_velocity(b.link, world[s + 1]);
+        let va = f.point_velocity(a.link, from);
+        let vb = f.point_velocity(b.link, to);
         g.rate += dot(unit, sub(vb, va));
-        f.add_point_force(b.link, world[s + 1], unit, &mut g.gradient);
-        f.add_point_force(a.link, world[s], scale(unit, -1.0), &mut g.gradient);
+        f.add_point_force(b.link, to, unit, &mut g.gradient);
+        f.add_point_force(a.link, from, scale(unit, -1.0), &mut g.gradient);
+        from = to;
     }
     g
 }
