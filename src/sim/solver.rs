@@ -702,7 +702,9 @@ fn newton(
     }
     let mut residual = f64::INFINITY;
     let mut last_shift = 0.0f64;
+    let mut done = 0;
     for iteration in 0..=params.max_iterations {
+        done = iteration;
         assemble(model, pose, x, ws, true, true);
         residual = gradient_norm(ws) / scale_norm;
         if !residual.is_finite() {
@@ -773,8 +775,9 @@ fn newton(
             break;
         }
     }
+    // Iterations whose step was taken: a failed line search ends the attempt early.
     Err(SolveError::NotConverged {
-        iterations: params.max_iterations,
+        iterations: done,
         residual,
         tolerance: params.tolerance,
     })
@@ -798,6 +801,8 @@ pub fn solve(
     let mut piece = 1.0f64;
     let mut halvings = 0usize;
     let mut curvature = Curvature::SemiDefinite;
+    // Iterations spent on pieces that did not converge (for the error).
+    let mut failed = 0usize;
     while t < 1.0 {
         let t_next = (t + piece).min(1.0);
         let a = interpolate(&start, target, t_next);
@@ -814,6 +819,9 @@ pub fn solve(
                 t = t_next;
             }
             Err(err) => {
+                if let SolveError::NotConverged { iterations, .. } = err {
+                    failed += iterations;
+                }
                 halvings += 1;
                 if halvings > params.max_halvings && curvature == Curvature::SemiDefinite {
                     // Follow the rest of the path again with the exact, shifted Hessian.
@@ -825,7 +833,7 @@ pub fn solve(
                 if halvings > params.max_halvings {
                     return Err(match err {
                         SolveError::NotConverged { residual, .. } => SolveError::NotConverged {
-                            iterations: report.iterations + params.max_iterations,
+                            iterations: report.iterations + failed,
                             residual,
                             tolerance: params.tolerance,
                         },
