@@ -6,7 +6,7 @@ use std::process::{Command, Output};
 
 use facelab::spec::{self, SpecError};
 
-use crate::{facelab, root};
+use crate::{assert_same_bytes, facelab, root};
 
 fn temp(name: &str) -> PathBuf {
     crate::temp("harness", name)
@@ -116,33 +116,31 @@ fn same_spec_gives_the_same_bytes_across_threads_and_from_the_cache() {
     assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
     let b = run_smoke(&two.join("results"), &["--threads", "2"]);
     assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
-    for file in [
-        "table1.csv",
-        "curves.csv",
-        "spec.toml",
-        "table2.csv",
-        "reference.csv",
-        "table2_frames.csv",
-        "unified.safetensors",
-    ] {
-        assert_eq!(
-            latest(&one.join("results"), file),
-            latest(&two.join("results"), file),
-            "{file} differs between 1 and 2 threads"
-        );
-    }
-    for file in [
-        "paper-tables/smoke_table1.md",
-        "paper-tables/smoke_table2.md",
-        "figures/smoke_table2/transfer_grid.png",
-        "figures/smoke_table2/talking_videos.gif",
-    ] {
-        assert_eq!(
-            std::fs::read(one.join(file)).unwrap(),
-            std::fs::read(two.join(file)).unwrap(),
-            "{file} differs between 1 and 2 threads"
-        );
-    }
+    assert_same_bytes(
+        &one.join("results/smoke/latest"),
+        &two.join("results/smoke/latest"),
+        &[
+            "table1.csv",
+            "curves.csv",
+            "spec.toml",
+            "table2.csv",
+            "reference.csv",
+            "table2_frames.csv",
+            "unified.safetensors",
+        ],
+        "1 and 2 threads",
+    );
+    assert_same_bytes(
+        &one,
+        &two,
+        &[
+            "paper-tables/smoke_table1.md",
+            "paper-tables/smoke_table2.md",
+            "figures/smoke_table2/transfer_grid.png",
+            "figures/smoke_table2/talking_videos.gif",
+        ],
+        "1 and 2 threads",
+    );
 
     // A second run computes nothing and writes the same bytes.
     let first = latest(&one.join("results"), "table1.csv");
@@ -270,4 +268,48 @@ fn two_runs_at_once_share_a_results_folder_and_verify_reproduces_them() {
         String::from_utf8_lossy(&verify.stderr)
     );
     assert!(stdout.contains("reproduced byte for byte"), "{stdout}");
+}
+
+#[test]
+fn manifest_names_the_commit_and_a_clean_checkout_whatever_the_run_writes_into_it() {
+    // A run inside a checkout writes its outputs there; they must not make the checkout it
+    // started from look modified.
+    let dir = temp("provenance");
+    let git = |args: &[&str]| {
+        let o = Command::new("git")
+            .args([
+                "-c",
+                "user.name=facelab",
+                "-c",
+                "user.email=facelab@localhost",
+            ])
+            .args(args)
+            .current_dir(&dir)
+            .output()
+            .expect("run git");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap().trim().to_string()
+    };
+    git(&["init", "-q"]);
+    git(&["commit", "-q", "--allow-empty", "-m", "start"]);
+    let head = git(&["rev-parse", "HEAD"]);
+    let run = Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(["run", &smoke(), "--results", "results"])
+        .args(["--set", "tables=[\"table1\"]"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        !git(&["status", "--porcelain"]).is_empty(),
+        "the run wrote nothing into the checkout"
+    );
+    let text = std::fs::read_to_string(dir.join("results/smoke/latest/manifest.json")).unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(manifest["git_revision"], head.as_str(), "{text}");
+    assert_eq!(manifest["git_dirty"], false, "{text}");
 }

@@ -3,7 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::{facelab, root};
+use facelab::observe::AU_COUNT;
+
+use crate::{assert_same_bytes, facelab, openface_file, root, Frame};
 
 fn temp(name: &str) -> PathBuf {
     crate::temp("neck", name)
@@ -48,21 +50,18 @@ fn headpose_spec_writes_its_tables_and_figures_identically_on_any_thread_count()
     assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
     let b = tiny_run(&two.join("results"), "2");
     assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
-    for name in [
-        "headpose_static.csv",
-        "headpose_sequences.csv",
-        "headpose_trajectories.csv",
-        "headpose_curves.csv",
-        "voluntary.safetensors",
-    ] {
-        let read =
-            |root: &Path| std::fs::read(root.join("results/headpose/latest").join(name)).unwrap();
-        assert_eq!(
-            read(&one),
-            read(&two),
-            "{name} differs between 1 and 2 threads"
-        );
-    }
+    assert_same_bytes(
+        &one.join("results/headpose/latest"),
+        &two.join("results/headpose/latest"),
+        &[
+            "headpose_static.csv",
+            "headpose_sequences.csv",
+            "headpose_trajectories.csv",
+            "headpose_curves.csv",
+            "voluntary.safetensors",
+        ],
+        "1 and 2 threads",
+    );
     let statics =
         std::fs::read_to_string(one.join("results/headpose/latest/headpose_static.csv")).unwrap();
     // 27 targets for each of the two controllers, plus the header.
@@ -88,33 +87,27 @@ fn headpose_spec_writes_its_tables_and_figures_identically_on_any_thread_count()
 
 /// A neutral face turning its head: yaw sweeps to `yaw_degrees`, pitch nods a little.
 fn turning_file(dir: &Path, frames: usize, yaw_degrees: f64, nan_frame: Option<usize>) -> PathBuf {
-    let aus = facelab::observe::AU_NAMES;
-    let mut text = String::from("frame, timestamp, confidence, success, pose_Tx, pose_Ty, pose_Tz, pose_Rx, pose_Ry, pose_Rz");
-    for a in aus {
-        text.push_str(&format!(", {a}_r"));
-    }
-    text.push('\n');
-    for f in 0..frames {
-        let t = f as f64 / (frames - 1) as f64;
-        let yaw = (yaw_degrees * t).to_radians();
-        let pitch = if nan_frame == Some(f) {
-            "nan".to_string()
-        } else {
-            format!("{:.4}", (8.0 * t).to_radians())
-        };
-        text.push_str(&format!(
-            "{}, {:.3}, 0.98, 1, 0.0, 0.0, 500.0, {pitch}, {yaw:.4}, 0.0",
-            f + 1,
-            f as f64 / 30.0
-        ));
-        for _ in aus {
-            text.push_str(", 0.05");
-        }
-        text.push('\n');
-    }
-    let path = dir.join("turning.csv");
-    std::fs::write(&path, text).unwrap();
-    path
+    let rows: Vec<Frame> = (0..frames)
+        .map(|f| {
+            let t = f as f64 / (frames - 1) as f64;
+            let pitch = if nan_frame == Some(f) {
+                "nan".to_string()
+            } else {
+                format!("{:.4}", (8.0 * t).to_radians())
+            };
+            let yaw = format!("{:.4}", (yaw_degrees * t).to_radians());
+            let pose = ["0.0", "0.0", "500.0", &pitch, &yaw, "0.0"];
+            Frame {
+                success: true,
+                extra: pose.map(String::from).to_vec(),
+                aus: [0.05; AU_COUNT],
+            }
+        })
+        .collect();
+    let pose = [
+        "pose_Tx", "pose_Ty", "pose_Tz", "pose_Rx", "pose_Ry", "pose_Rz",
+    ];
+    openface_file(dir, "turning.csv", &pose, &rows)
 }
 
 /// `facelab transfer` with the network of the run folder `model` and the neck controller of

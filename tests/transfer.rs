@@ -12,7 +12,7 @@ use facelab::learn::Mlp;
 use facelab::observe::AU_COUNT;
 use facelab::sim::{SolveParams, Workspace};
 
-use crate::{facelab, root};
+use crate::{facelab, openface_file, root, Frame};
 
 fn temp(name: &str) -> PathBuf {
     crate::temp("transfer", name)
@@ -130,34 +130,22 @@ fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
 /// An OpenFace file as FeatureExtraction writes it with `, ` separators and no face_id,
 /// with `frames` rows of a joy onset (AU06, AU12, AU25 rising) and one failed frame.
 fn joy_file(dir: &Path, frames: usize) -> PathBuf {
-    let aus = facelab::observe::AU_NAMES;
-    let mut text = String::from("frame, timestamp, confidence, success");
-    for a in aus {
-        text.push_str(&format!(", {a}_r"));
-    }
-    text.push('\n');
-    for f in 0..frames {
-        let t = f as f64 / (frames - 1).max(1) as f64;
-        let success = if f == 1 { 0 } else { 1 };
-        text.push_str(&format!(
-            "{}, {:.3}, 0.98, {success}",
-            f + 1,
-            f as f64 / 30.0
-        ));
-        for a in aus {
-            let v = match a {
-                "AU06" => 2.0 * t,
-                "AU12" => 2.8 * t,
-                "AU25" => 1.2 * t,
-                _ => 0.05,
-            };
-            text.push_str(&format!(", {v:.2}"));
-        }
-        text.push('\n');
-    }
-    let path = dir.join("joy.csv");
-    std::fs::write(&path, text).unwrap();
-    path
+    let rows: Vec<Frame> = (0..frames)
+        .map(|f| {
+            let t = f as f64 / (frames - 1).max(1) as f64;
+            Frame {
+                success: f != 1,
+                extra: Vec::new(),
+                aus: facelab::observe::AU_NAMES.map(|a| match a {
+                    "AU06" => 2.0 * t,
+                    "AU12" => 2.8 * t,
+                    "AU25" => 1.2 * t,
+                    _ => 0.05,
+                }),
+            }
+        })
+        .collect();
+    openface_file(dir, "joy.csv", &[], &rows)
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! `facelab bench solve`: solve time per sample (cold from rest, warm from the previous
-//! sample), model size, and the linear basis' time and landmark error against the nonlinear
-//! solve. Prints `name value unit` lines. Run it on a release build.
+//! sample), model size, where a Newton iteration's time goes, and the linear basis' time and
+//! landmark error against the nonlinear solve. Prints `name value unit` lines. Run it on a
+//! release build.
 
 use std::io::Write;
 use std::time::Instant;
@@ -13,7 +14,7 @@ use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::geom::{norm, sub, V3};
-use crate::sim::solver::solve_predicted;
+use crate::sim::solver::{iteration_cost, solve_predicted};
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 
 /// Random expression activations as the dataset stage draws them: a random expression,
@@ -132,6 +133,44 @@ pub fn bench_solve(
             warm_iterations as f64 / count as f64,
             "count",
         )?;
+        line(
+            out,
+            &format!("{p}.warm_ms_per_iteration"),
+            warm * 1e3 * count as f64 / warm_iterations.max(1) as f64,
+            "ms",
+        )?;
+
+        // Where an iteration's time goes, at the first equilibria of the batch.
+        let probes = &states[..states.len().min(10)];
+        let (mut assemble, mut factorize, mut energy) = (0.0, 0.0, 0.0);
+        let mut nonzeros = (0, 0);
+        for s in probes {
+            let c = iteration_cost(&model, s, &mut ws, 5);
+            assemble += c.assemble / probes.len() as f64;
+            factorize += c.factorize / probes.len() as f64;
+            energy += c.energy / probes.len() as f64;
+            nonzeros = (c.hessian_nonzeros, c.factor_nonzeros);
+        }
+        line(
+            out,
+            &format!("{p}.hessian_nonzeros"),
+            nonzeros.0 as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.factor_nonzeros"),
+            nonzeros.1 as f64,
+            "count",
+        )?;
+        line(out, &format!("{p}.assemble_ms"), assemble * 1e3, "ms")?;
+        line(
+            out,
+            &format!("{p}.factorize_solve_ms"),
+            factorize * 1e3,
+            "ms",
+        )?;
+        line(out, &format!("{p}.energy_ms"), energy * 1e3, "ms")?;
 
         // Linear basis, and solves started from its prediction.
         let t = Instant::now();

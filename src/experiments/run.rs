@@ -800,6 +800,10 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_else(|| PathBuf::from("."));
+    // Provenance is read before the run writes anything: its own new outputs in a checkout
+    // would otherwise always count as uncommitted changes.
+    let git_revision = git(&["rev-parse", "HEAD"]).unwrap_or_else(|| "unknown".into());
+    let git_dirty = git(&["status", "--porcelain"]).map(|s| !s.is_empty());
     let run_dir = new_run_dir(&experiment_dir)?;
     let mut records = Vec::new();
     let mut outputs: BTreeMap<String, String> = BTreeMap::new();
@@ -956,8 +960,8 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     }
     let manifest = serde_json::json!({
         "facelab_version": env!("CARGO_PKG_VERSION"),
-        "git_revision": git(&["rev-parse", "HEAD"]).unwrap_or_else(|| "unknown".into()),
-        "git_dirty": git(&["status", "--porcelain"]).map(|s| !s.is_empty()),
+        "git_revision": git_revision,
+        "git_dirty": git_dirty,
         "spec": spec_path.display().to_string(),
         "sets": opts.sets,
         "experiment": experiment,

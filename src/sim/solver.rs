@@ -918,6 +918,59 @@ pub fn solve_predicted(
     Ok((state, report))
 }
 
+/// Where the time of one Newton iteration goes, measured at a state (`facelab bench solve`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IterationCost {
+    /// Stored entries of the Hessian (lower triangle).
+    pub hessian_nonzeros: usize,
+    /// Stored entries of its Cholesky factor.
+    pub factor_nonzeros: usize,
+    /// Gradient and Hessian assembly (s).
+    pub assemble: f64,
+    /// Numeric Cholesky factorisation and the two triangular solves (s).
+    pub factorize: f64,
+    /// One energy evaluation, which each line-search trial makes (s).
+    pub energy: f64,
+}
+
+/// Times the parts of a Newton iteration at `state` for its own activations, each the mean
+/// of `repeats` runs. The positive semi-definite Hessian is factorised, so the factorisation
+/// runs to completion as it does in every iteration that takes a step.
+pub fn iteration_cost(
+    model: &FaceModel,
+    state: &State,
+    ws: &mut Workspace,
+    repeats: usize,
+) -> IterationCost {
+    let repeats = repeats.max(1);
+    let pose = model.pose(&state.activations);
+    let x = &state.positions;
+    let mean = |t: std::time::Instant| t.elapsed().as_secs_f64() / repeats as f64;
+    let t = std::time::Instant::now();
+    for _ in 0..repeats {
+        assemble(model, &pose, x, ws, true, false);
+    }
+    let assemble_s = mean(t);
+    let values = ws.values.clone();
+    let t = std::time::Instant::now();
+    for _ in 0..repeats {
+        ws.values.copy_from_slice(&values);
+        std::hint::black_box(ws.newton_step());
+    }
+    let factorize = mean(t);
+    let t = std::time::Instant::now();
+    for _ in 0..repeats {
+        std::hint::black_box(energy(model, &pose, x));
+    }
+    IterationCost {
+        hessian_nonzeros: values.len(),
+        factor_nonzeros: ws.pattern.cholesky.len_val(),
+        assemble: assemble_s,
+        factorize,
+        energy: mean(t),
+    }
+}
+
 /// The relative residual of `state` for its own activations (for checking a returned state).
 pub fn residual(model: &FaceModel, state: &State, ws: &mut Workspace) -> f64 {
     let pose = model.pose(&state.activations);
