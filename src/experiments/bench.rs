@@ -143,24 +143,22 @@ pub fn bench_solve(
         // Where an iteration's time goes, at the first equilibria of the batch.
         let probes = &states[..states.len().min(10)];
         let (mut assemble, mut factorize, mut energy) = (0.0, 0.0, 0.0);
-        let mut nonzeros = (0, 0);
         for s in probes {
             let c = iteration_cost(&model, s, &mut ws, 5);
             assemble += c.assemble / probes.len() as f64;
             factorize += c.factorize / probes.len() as f64;
             energy += c.energy / probes.len() as f64;
-            nonzeros = (c.hessian_nonzeros, c.factor_nonzeros);
         }
         line(
             out,
             &format!("{p}.hessian_nonzeros"),
-            nonzeros.0 as f64,
+            ws.hessian_nonzeros() as f64,
             "count",
         )?;
         line(
             out,
             &format!("{p}.factor_nonzeros"),
-            nonzeros.1 as f64,
+            ws.factor_nonzeros() as f64,
             "count",
         )?;
         line(out, &format!("{p}.assemble_ms"), assemble * 1e3, "ms")?;

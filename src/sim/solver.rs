@@ -347,6 +347,16 @@ impl Workspace {
         self.pattern.dof
     }
 
+    /// Stored entries of the Hessian (lower triangle).
+    pub fn hessian_nonzeros(&self) -> usize {
+        self.values.len()
+    }
+
+    /// Stored entries of its Cholesky factor.
+    pub fn factor_nonzeros(&self) -> usize {
+        self.factor.len()
+    }
+
     /// Factorises the assembled Hessian and overwrites `step` with `-H^-1 gradient`.
     /// Returns false if the matrix is not positive definite.
     fn newton_step(&mut self) -> bool {
@@ -921,10 +931,6 @@ pub fn solve_predicted(
 /// Where the time of one Newton iteration goes, measured at a state (`facelab bench solve`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IterationCost {
-    /// Stored entries of the Hessian (lower triangle).
-    pub hessian_nonzeros: usize,
-    /// Stored entries of its Cholesky factor.
-    pub factor_nonzeros: usize,
     /// Gradient and Hessian assembly (s).
     pub assemble: f64,
     /// Numeric Cholesky factorisation and the two triangular solves (s).
@@ -963,8 +969,6 @@ pub fn iteration_cost(
         std::hint::black_box(energy(model, &pose, x));
     }
     IterationCost {
-        hessian_nonzeros: values.len(),
-        factor_nonzeros: ws.pattern.cholesky.len_val(),
         assemble: assemble_s,
         factorize,
         energy: mean(t),
