@@ -1,5 +1,6 @@
 //! `facelab bench solve`: solve time per sample (cold from rest, warm from the previous
-//! sample), model size, where a Newton iteration's time goes, and the linear basis' time and
+//! sample), model size, where a Newton iteration's time goes, how many returned faces are
+//! saddles of the energy rather than stable equilibria, and the linear basis' time and
 //! landmark error against the nonlinear solve. Prints `name value unit` lines. Run it on a
 //! release build.
 
@@ -9,12 +10,13 @@ use std::time::Instant;
 use anyhow::Result;
 
 use super::face::FaceSource;
+use super::observe::median;
 use crate::observe::landmarks;
 use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::geom::{norm, sub, V3};
-use crate::sim::solver::{iteration_cost, solve_predicted};
+use crate::sim::solver::{iteration_cost, softest_mode, solve_predicted, SoftMode};
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 
 /// Random expression activations as the dataset stage draws them: a random expression,
@@ -169,6 +171,50 @@ pub fn bench_solve(
             "ms",
         )?;
         line(out, &format!("{p}.energy_ms"), energy * 1e3, "ms")?;
+
+        // The softest mode of every returned face: a negative one marks a saddle of the
+        // energy, not a stable equilibrium.
+        let mut springs: Vec<f64> = model.tissue.springs.iter().map(|s| s.k).collect();
+        line(
+            out,
+            &format!("{p}.spring_stiffness_median_n_per_m"),
+            median(&mut springs),
+            "N/m",
+        )?;
+        let modes: Vec<SoftMode> = states
+            .iter()
+            .filter_map(|s| softest_mode(&model, s, &mut ws, true, 80))
+            .collect();
+        let mut stiffness: Vec<f64> = modes.iter().map(|m| m.stiffness).collect();
+        let mut saddle_share: Vec<f64> = modes
+            .iter()
+            .filter(|m| m.stiffness < 0.0)
+            .map(|m| m.vertex_share)
+            .collect();
+        line(
+            out,
+            &format!("{p}.saddles"),
+            saddle_share.len() as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.saddle_mode_vertex_share_median"),
+            median(&mut saddle_share),
+            "fraction",
+        )?;
+        line(
+            out,
+            &format!("{p}.softest_mode_min_n_per_m"),
+            stiffness.iter().copied().fold(f64::INFINITY, f64::min),
+            "N/m",
+        )?;
+        line(
+            out,
+            &format!("{p}.softest_mode_median_n_per_m"),
+            median(&mut stiffness),
+            "N/m",
+        )?;
 
         // Linear basis, and solves started from its prediction.
         let t = Instant::now();

@@ -109,10 +109,13 @@ pub struct Agreement {
     pub mean_abs_diff: [f64; AU_COUNT],
 }
 
-fn median(values: &mut [f64]) -> f64 {
+/// The median (NaN for no values); sorts `values`.
+pub(crate) fn median(values: &mut [f64]) -> f64 {
     values.sort_by(f64::total_cmp);
     let n = values.len();
-    if n % 2 == 1 {
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
         values[n / 2]
     } else {
         0.5 * (values[n / 2 - 1] + values[n / 2])

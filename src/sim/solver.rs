@@ -385,6 +385,65 @@ impl Workspace {
         );
         self.step.iter().all(|v| v.is_finite())
     }
+
+    /// Adds `by` to every diagonal entry of the assembled Hessian.
+    fn shift_diagonal(&mut self, by: f64) {
+        for d in &self.pattern.diag {
+            for k in [0, 4, 8] {
+                self.values[d[k] as usize] += by;
+            }
+        }
+    }
+
+    /// Inverse iteration on the assembled Hessian: factorises it once, then replaces `v` by
+    /// `H^-1 v`, normalised, `iterations` times, so `v` turns toward the eigenvector of the
+    /// smallest eigenvalue. Returns false if the matrix is not positive definite.
+    fn inverse_iteration(&mut self, v: &mut [f64], iterations: usize) -> bool {
+        let mat = SparseColMatRef::new(self.pattern.matrix_pattern(), &self.values);
+        let Ok(llt) = self.pattern.cholesky.factorize_numeric_llt(
+            &mut self.factor,
+            mat,
+            Side::Lower,
+            LltRegularization::default(),
+            Par::Seq,
+            MemStack::new(&mut self.stack),
+            Default::default(),
+        ) else {
+            return false;
+        };
+        let dof = self.pattern.dof;
+        for _ in 0..iterations {
+            llt.solve_in_place_with_conj(
+                Conj::No,
+                MatMut::from_column_major_slice_mut(v, dof, 1),
+                Par::Seq,
+                MemStack::new(&mut self.stack),
+            );
+            let length = dot_slices(v, v).sqrt();
+            if !length.is_finite() || length == 0.0 {
+                return false;
+            }
+            v.iter_mut().for_each(|x| *x /= length);
+        }
+        true
+    }
+
+    /// `H v` from the assembled lower-triangle values.
+    fn hessian_times(&self, v: &[f64]) -> Vec<f64> {
+        let sym = self.pattern.symbolic.as_ref();
+        let (cp, ri) = (sym.col_ptr(), sym.row_idx());
+        let mut out = vec![0.0; v.len()];
+        for col in 0..self.pattern.dof {
+            for k in cp[col]..cp[col + 1] {
+                let (row, h) = (ri[k], self.values[k]);
+                out[row] += h * v[col];
+                if row != col {
+                    out[col] += h * v[row];
+                }
+            }
+        }
+        out
+    }
 }
 
 /// Adds a symmetric 3x3 block `k` (row-major) to the slots.
@@ -749,15 +808,11 @@ fn newton(
             if next > 1e12 {
                 return Err(SolveError::NonFinite { iteration });
             }
-            for d in &ws.pattern.diag {
-                for k in [0, 4, 8] {
-                    ws.values[d[k] as usize] += next - shift;
-                }
-            }
+            ws.shift_diagonal(next - shift);
             shift = next;
         }
         last_shift = shift;
-        let slope: f64 = ws.step.iter().zip(&ws.gradient).map(|(s, g)| s * g).sum();
+        let slope = dot_slices(&ws.step, &ws.gradient);
         // Backtracking (Armijo) line search on the energy.
         let mut alpha = 1.0;
         let mut accepted = false;
@@ -975,6 +1030,104 @@ pub fn iteration_cost(
     }
 }
 
+/// The softest way the face can deform at a state: the smallest eigenvalue of the Hessian
+/// of its energy, and where the eigenvector lives (`facelab bench solve`).
+///
+/// At a stable equilibrium the exact Hessian is positive definite; a negative smallest
+/// eigenvalue says the solve stopped at a saddle, where the face could lower its energy by
+/// moving along the mode. A mode carried by one vertex column is a mesh-scale instability
+/// (the surface node tilting over the node beneath it), not a deformation of the face.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SoftMode {
+    /// Smallest eigenvalue of the Hessian over the free coordinates (N/m); negative where the
+    /// state is a saddle of the energy.
+    pub stiffness: f64,
+    /// The surface vertex whose column of nodes (all four sheets) carries most of the mode.
+    pub vertex: usize,
+    /// Share of the mode's squared length carried by that vertex's column and its mirror
+    /// image's, in [0, 1]: near 1 for a mode local to one spot of a symmetric face.
+    pub vertex_share: f64,
+    /// `|H v - stiffness v| / |stiffness|` for the unit vector found: how far the inverse
+    /// iteration is from an eigenvector.
+    pub eigen_residual: f64,
+}
+
+/// The softest mode of the exact Hessian (`exact`) or of its positive semi-definite part at
+/// `state`, for its own activations, by `iterations` steps of inverse iteration. Where the
+/// Hessian is indefinite the iteration runs on it shifted by the smallest power of ten that
+/// makes it positive definite, and the stiffness found is negative. `None` only if no shift
+/// up to 1e12 N/m does.
+pub fn softest_mode(
+    model: &FaceModel,
+    state: &State,
+    ws: &mut Workspace,
+    exact: bool,
+    iterations: usize,
+) -> Option<SoftMode> {
+    let pose = model.pose(&state.activations);
+    assemble(model, &pose, &state.positions, ws, true, exact);
+    let (stiffness, v, eigen_residual) = lowest_eigenpair(ws, iterations)?;
+    let n = model.vertex_count();
+    let mut column = vec![0.0; n];
+    for (node, &f) in ws.pattern.free_index.iter().enumerate() {
+        if f != NONE {
+            let f = 3 * f as usize;
+            column[node % n] += dot_slices(&v[f..f + 3], &v[f..f + 3]);
+        }
+    }
+    let vertex = (0..n)
+        .max_by(|&a, &b| column[a].total_cmp(&column[b]))
+        .expect("a face has vertices");
+    let mirror = model.mirror[vertex];
+    let vertex_share = if mirror == vertex {
+        column[vertex]
+    } else {
+        column[vertex] + column[mirror]
+    };
+    Some(SoftMode {
+        stiffness,
+        vertex,
+        vertex_share,
+        eigen_residual,
+    })
+}
+
+/// The smallest eigenvalue of the assembled Hessian, its unit eigenvector and the relative
+/// residual `|H v - lambda v| / |lambda|`, by inverse iteration, shifted where the Hessian is
+/// indefinite (see `softest_mode`). Leaves the Hessian as it was, shift included.
+fn lowest_eigenpair(ws: &mut Workspace, iterations: usize) -> Option<(f64, Vec<f64>, f64)> {
+    // A fixed start with no symmetry, so that no eigenvector is missed by being orthogonal.
+    let start: Vec<f64> = (0..ws.dof())
+        .map(|i| 1.0 + (i as f64 * 0.618_034).fract())
+        .collect();
+    let mut v = start.clone();
+    let mut shift = 0.0;
+    while !ws.inverse_iteration(&mut v, iterations) {
+        let next: f64 = if shift == 0.0 { 1e-3 } else { shift * 10.0 };
+        if next > 1e12 {
+            return None;
+        }
+        ws.shift_diagonal(next - shift);
+        shift = next;
+        v.clone_from(&start);
+    }
+    let hv = ws.hessian_times(&v);
+    let shifted = dot_slices(&hv, &v);
+    let stiffness = shifted - shift;
+    let residual = hv
+        .iter()
+        .zip(&v)
+        .map(|(h, x)| (h - shifted * x).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / stiffness.abs();
+    Some((stiffness, v, residual))
+}
+
+fn dot_slices(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
 /// The relative residual of `state` for its own activations (for checking a returned state).
 pub fn residual(model: &FaceModel, state: &State, ws: &mut Workspace) -> f64 {
     let pose = model.pose(&state.activations);
@@ -1001,21 +1154,85 @@ mod tests {
         FaceModel::new(&mesh, FaceParams::default()).unwrap()
     }
 
-    /// `H v` from the lower-triangle CSC values.
-    fn hess_mul(ws: &Workspace, v: &[f64]) -> Vec<f64> {
-        let sym = ws.pattern.symbolic.as_ref();
-        let (cp, ri) = (sym.col_ptr(), sym.row_idx());
-        let mut out = vec![0.0; v.len()];
-        for col in 0..ws.pattern.dof {
-            for k in cp[col]..cp[col + 1] {
-                let (row, h) = (ri[k], ws.values[k]);
-                out[row] += h * v[col];
-                if row != col {
-                    out[col] += h * v[row];
-                }
+    #[test]
+    fn softest_mode_is_an_eigenpair_below_every_rayleigh_quotient() {
+        let m = model();
+        let mut a = Activations::neutral();
+        for (name, v) in [
+            ("zygomaticus_major_left", 0.9),
+            ("zygomaticus_major_right", 0.9),
+            ("jaw_rotation", 0.3),
+        ] {
+            a.set(name, v).unwrap();
+        }
+        let mut ws = Workspace::new(&m);
+        let (state, _) = solve_from_rest(&m, &a, &mut ws, &SolveParams::default()).unwrap();
+        let mut rng = stream(3, "test/softest_mode");
+        for exact in [true, false] {
+            let mode = softest_mode(&m, &state, &mut ws, exact, 80).expect("a finite Hessian");
+            assert!(mode.stiffness > 0.0, "{mode:?}");
+            assert!(mode.eigen_residual < 1e-2, "{mode:?}");
+            assert!((0.0..=1.0 + 1e-12).contains(&mode.vertex_share), "{mode:?}");
+            assert!(m.free[mode.vertex], "{mode:?}");
+            // The smallest eigenvalue bounds the Rayleigh quotient of every direction.
+            for _ in 0..20 {
+                let v: Vec<f64> = (0..ws.dof()).map(|_| rng.normal()).collect();
+                let q = dot_slices(&ws.hessian_times(&v), &v) / dot_slices(&v, &v);
+                assert!(
+                    mode.stiffness <= q,
+                    "{} > Rayleigh quotient {q}",
+                    mode.stiffness
+                );
             }
         }
-        out
+    }
+
+    #[test]
+    fn a_negative_softest_mode_is_negative_curvature_of_the_energy() {
+        // Every free node drawn 2% toward the face's centre compresses the springs; their
+        // geometric stiffness then makes the exact Hessian indefinite.
+        let m = model();
+        let mut state = m.rest_state();
+        let count = state.positions.len() as f64;
+        let centre = state.positions.iter().fold([0.0; 3], |c, p| {
+            [
+                c[0] + p[0] / count,
+                c[1] + p[1] / count,
+                c[2] + p[2] / count,
+            ]
+        });
+        for (node, p) in state.positions.iter_mut().enumerate() {
+            if m.free[node] {
+                *p = [0, 1, 2].map(|c| centre[c] + 0.98 * (p[c] - centre[c]));
+            }
+        }
+        let pose = m.pose(&state.activations);
+        let mut ws = Workspace::new(&m);
+        assemble(&m, &pose, &state.positions, &mut ws, true, true);
+        let (lambda, v, residual) = lowest_eigenpair(&mut ws, 80).expect("a finite Hessian");
+        assert!(lambda < 0.0, "smallest eigenvalue {lambda}");
+        assert!(residual < 1e-2, "eigen residual {residual}");
+        let mode = softest_mode(&m, &state, &mut ws, true, 80).unwrap();
+        assert_eq!(mode.stiffness, lambda);
+        // The energy's second difference along the mode is its eigenvalue.
+        let along = |t: f64| {
+            let mut y = state.positions.clone();
+            for (node, p) in y.iter_mut().enumerate() {
+                let f = ws.pattern.free_index[node];
+                if f != NONE {
+                    for c in 0..3 {
+                        p[c] += t * v[3 * f as usize + c];
+                    }
+                }
+            }
+            energy(&m, &pose, &y)
+        };
+        let t = 1e-6;
+        let curvature = (along(t) - 2.0 * along(0.0) + along(-t)) / (t * t);
+        assert!(
+            (curvature - lambda).abs() <= 1e-3 * lambda.abs(),
+            "energy curvature {curvature} against eigenvalue {lambda}"
+        );
     }
 
     #[test]
@@ -1065,7 +1282,7 @@ mod tests {
             (analytic - numeric).abs() <= 1e-6 * analytic.abs().max(1e-9),
             "directional derivative {analytic} vs finite difference {numeric}"
         );
-        let hv = hess_mul(&ws, &dir);
+        let hv = ws.hessian_times(&dir);
         assemble(&m, &pose, &moved(h), &mut ws, false, false);
         let gp = ws.gradient.clone();
         assemble(&m, &pose, &moved(-h), &mut ws, false, false);
