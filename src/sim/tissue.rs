@@ -28,7 +28,7 @@ pub struct TissueParams {
     pub dermal_fatty_thickness: f64,
     /// Muscle layer thickness, fascia to skull (m). Default 3 mm (mimetic muscles are 1-4 mm).
     pub muscle_layer_thickness: f64,
-    /// Young's modulus of the epidermis/dermis slab (Pa). Default 150 kPa: in-vivo skin
+    /// Young's modulus of the epidermis/dermis slab (Pa). Default 60 kPa: in-vivo skin
     /// at small strain is 50-200 kPa (suction and indentation tests).
     pub epidermis_modulus: f64,
     /// Strain beyond which epidermal in-sheet springs stiffen (LTW95's biphasic spring).
@@ -37,9 +37,9 @@ pub struct TissueParams {
     /// Stiffness ratio of the epidermal springs past the stiffening strain. Default 8 (LTW95
     /// use a stiffer second slope; skin's linear region is 5-20x its toe region).
     pub epidermis_stiffening_factor: f64,
-    /// Young's modulus of the dermal-fatty slab (Pa). Default 20 kPa (subcutaneous fat 2-25 kPa).
+    /// Young's modulus of the dermal-fatty slab (Pa). Default 10 kPa (subcutaneous fat 2-25 kPa).
     pub dermal_fatty_modulus: f64,
-    /// Young's modulus of the muscle layer (Pa). Default 8 kPa: loose areolar tissue under the
+    /// Young's modulus of the muscle layer (Pa). Default 5 kPa: loose areolar tissue under the
     /// fascia lets it slide over the skull (LTW95 make these springs the weakest).
     pub muscle_layer_modulus: f64,
     /// Crossing-spring stiffness as a fraction of the in-sheet stiffness of the same slab
@@ -47,11 +47,12 @@ pub struct TissueParams {
     pub crossing_fraction: f64,
     /// Volume-preservation modulus (Pa): energy kappa V0 (0.5 (J - 1)^2 + 0.2 (J - 1 - ln J)),
     /// J = V / V0, per prism (LTW95's volume constraint as a penalty, with a log barrier
-    /// against inversion). Default 100 kPa, above the shear moduli: tissue is
+    /// against inversion). Default 50 kPa, above the shear moduli: tissue is
     /// nearly incompressible but the penalty must not dominate the springs numerically.
     pub volume_modulus: f64,
-    /// Skull contact stiffness per fascia node (N/m). Default 5000 N/m, ~40x the muscle-layer
-    /// vertical springs, so penetration stays a small fraction of the layer.
+    /// Skull contact stiffness per fascia node (N/m). Default 5000 N/m, ~55x the median
+    /// muscle-layer vertical spring (91 N/m at subdivision 0), so penetration stays a small
+    /// fraction of the layer.
     pub skull_contact_stiffness: f64,
     /// Closest approach of the fascia to the skull, as a fraction of the muscle layer
     /// thickness. Default 0.25.
