@@ -43,6 +43,10 @@ struct FaceArgs {
     /// Loop subdivision levels (0, 1 or 2)
     #[arg(long, default_value_t = 0)]
     subdivisions: u8,
+    /// Shear modulus of the tissue prisms as a fraction of E/3 (0 = springs alone, the
+    /// default; 1 = the layers' continuum shear stiffness)
+    #[arg(long)]
+    shear_modulus_fraction: Option<f64>,
 }
 
 impl FaceArgs {
@@ -51,6 +55,7 @@ impl FaceArgs {
             mesh: self.mesh.clone(),
             expressions: self.expressions.clone(),
             subdivisions: self.subdivisions,
+            shear_modulus_fraction: self.shear_modulus_fraction,
         }
     }
 }

@@ -64,6 +64,23 @@ fn activation_outside_unit_interval_is_rejected() {
 }
 
 #[test]
+fn negative_shear_modulus_fraction_is_rejected() {
+    let out = temp("shear.png");
+    let (ok, err) = facelab(&[
+        "render",
+        "--shear-modulus-fraction=-1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(
+        err.contains("--shear-modulus-fraction must be a finite number >= 0, got -1"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing written on error");
+}
+
+#[test]
 fn missing_mesh_file_is_named() {
     let out = temp("missing.png");
     let (ok, err) = facelab(&[

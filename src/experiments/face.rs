@@ -23,10 +23,17 @@ pub struct FaceSource {
     /// Expression weights; default `experiments/expressions.csv`.
     pub expressions: Option<PathBuf>,
     pub subdivisions: u8,
+    /// `TissueParams::shear_modulus_fraction`; default that field's default.
+    pub shear_modulus_fraction: Option<f64>,
 }
 
 impl FaceSource {
     pub fn model(&self) -> Result<FaceModel> {
+        if let Some(f) = self.shear_modulus_fraction {
+            if !(f.is_finite() && f >= 0.0) {
+                bail!("--shear-modulus-fraction must be a finite number >= 0, got {f}");
+            }
+        }
         FaceModel::new(&self.mesh()?, self.params()).with_context(|| {
             format!(
                 "{}: cannot build the face model",
@@ -45,10 +52,14 @@ impl FaceSource {
     }
 
     pub fn params(&self) -> FaceParams {
-        FaceParams {
+        let mut params = FaceParams {
             subdivisions: self.subdivisions,
             ..FaceParams::default()
+        };
+        if let Some(f) = self.shear_modulus_fraction {
+            params.tissue.shear_modulus_fraction = f;
         }
+        params
     }
 
     pub fn weights(&self) -> Result<ExpressionWeights> {

@@ -510,6 +510,24 @@ fn skew(e: V3, s: f64) -> [[f64; 3]; 3] {
     ]
 }
 
+/// Shear modulus of the prisms of each slab (Pa), from `TissueParams::shear_modulus_fraction`.
+fn shear_moduli(model: &FaceModel) -> [f64; 3] {
+    let tp = &model.params.tissue;
+    [
+        tp.epidermis_modulus,
+        tp.dermal_fatty_modulus,
+        tp.muscle_layer_modulus,
+    ]
+    .map(|e| tp.shear_modulus_fraction * e / 3.0)
+}
+
+/// A prism's node positions relative to its first node: the Gram term is translation
+/// invariant, and small differences keep its sums accurate.
+fn relative(p: &super::tissue::Prism, x: &[V3]) -> [V3; 6] {
+    let origin = x[p.nodes[0]];
+    p.nodes.map(|i| sub(x[i], origin))
+}
+
 /// Total energy at `x` (J), or infinity if a prism is inverted (signed volume <= 0). A prism
 /// of the thin muscle layer may shear so far that one of its tetrahedra turns over while the
 /// prism keeps its volume: that is the fascia sliding over the skull, not an inversion.
@@ -526,6 +544,7 @@ fn energy(model: &FaceModel, pose: &Pose, x: &[V3]) -> f64 {
         )
         .0;
     }
+    let shear = shear_moduli(model);
     for p in &model.tissue.prisms {
         let volume = prism_volume(&p.nodes.map(|i| x[i]));
         if volume <= 0.0 {
@@ -535,6 +554,17 @@ fn energy(model: &FaceModel, pose: &Pose, x: &[V3]) -> f64 {
         e += tp.volume_modulus
             * p.rest_volume
             * (0.5 * (j - 1.0).powi(2) + VOLUME_BARRIER * (j - 1.0 - j.ln()));
+        let mu = shear[p.nodes[0] / model.vertex_count()];
+        if mu > 0.0 {
+            let r = relative(p, x);
+            let mut distortion = 0.0;
+            for (a, ra) in r.iter().enumerate() {
+                for (b, rb) in r.iter().enumerate() {
+                    distortion += p.gram[a][b] * dot(*ra, *rb);
+                }
+            }
+            e += mu * (0.5 * distortion - p.rest_volume * j.ln());
+        }
     }
     for (c, &(anchor, normal)) in model.contacts.iter().zip(&pose.skull) {
         let gap = dot(sub(x[c.node], anchor), normal) - c.clearance;
@@ -573,6 +603,7 @@ fn assemble(
     full: bool,
 ) {
     let tp = &model.params.tissue;
+    let shear = shear_moduli(model);
     let pat = &ws.pattern;
     let g = &mut ws.gradient;
     let h = &mut ws.values;
@@ -629,8 +660,38 @@ fn assemble(
         // grad = kappa (J - 1 + b (1 - 1/J)) grad V,
         // hess = kappa (1 + b / J^2) / V0 grad V grad V^T + kappa (J - 1 + b (1 - 1/J)) hess V.
         let j = v / p.rest_volume;
-        let coef = tp.volume_modulus * (j - 1.0 + VOLUME_BARRIER * (1.0 - 1.0 / j));
-        let c = tp.volume_modulus * (1.0 + VOLUME_BARRIER / (j * j)) / p.rest_volume;
+        let mut coef = tp.volume_modulus * (j - 1.0 + VOLUME_BARRIER * (1.0 - 1.0 / j));
+        let mut c = tp.volume_modulus * (1.0 + VOLUME_BARRIER / (j * j)) / p.rest_volume;
+        let mu = shear[p.nodes[0] / model.vertex_count()];
+        if mu > 0.0 {
+            // mu (x^T S x / 2 - V0 ln J): grad = mu S x - (mu / J) grad V,
+            // hess = mu S (x) I + mu / (V0 J^2) grad V grad V^T - (mu / J) hess V.
+            coef -= mu / j;
+            c += mu / (p.rest_volume * j * j);
+            let r = relative(p, x);
+            for (a, row) in p.gram.iter().enumerate() {
+                let mut f = [0.0; 3];
+                for (s, rb) in row.iter().zip(&r) {
+                    for d in 0..3 {
+                        f[d] += s * rb[d];
+                    }
+                }
+                add_grad(g, p.nodes[a], f, mu);
+            }
+            if hessian {
+                for a in 0..6 {
+                    add_diag(
+                        h,
+                        p.nodes[a],
+                        &iso_plus_outer(mu * p.gram[a][a], [0.0; 3], 0.0),
+                    );
+                }
+                for (slots, &(a, b)) in pat.prism_off[pi].iter().zip(&PRISM_PAIRS) {
+                    let k = iso_plus_outer(mu * p.gram[a][b], [0.0; 3], 0.0);
+                    add_block(h, slots, &k, 1.0);
+                }
+            }
+        }
         for k in 0..6 {
             add_grad(g, p.nodes[k], dv[k], coef);
         }
@@ -1237,7 +1298,60 @@ mod tests {
 
     #[test]
     fn gradient_and_hessian_match_finite_differences() {
-        let m = model();
+        check_derivatives(&model());
+    }
+
+    fn sheared_model() -> FaceModel {
+        let mesh = read_obj(&default_mesh_path()).unwrap();
+        let mut params = FaceParams::default();
+        params.tissue.shear_modulus_fraction = 1.0;
+        FaceModel::new(&mesh, params).unwrap()
+    }
+
+    #[test]
+    fn gradient_and_hessian_match_finite_differences_with_prism_shear() {
+        check_derivatives(&sheared_model());
+    }
+
+    #[test]
+    fn prism_shear_leaves_the_rest_face_unstressed_and_stiffens_it() {
+        let (plain, sheared) = (model(), sheared_model());
+        let a = Activations::neutral();
+        let pose = sheared.pose(&a);
+        let rest = rest_under(&sheared, &pose);
+        let mut ws = Workspace::new(&sheared);
+        assemble(&sheared, &pose, &rest, &mut ws, false, false);
+        // A single muscle at 1e-3 pulls with ~1e-3 N; the rest face must be far below that.
+        assert!(
+            gradient_norm(&ws) < 1e-12,
+            "rest force {:e} N",
+            gradient_norm(&ws)
+        );
+        // Sliding the surface sheet over the dermis (10 um, upward along the surface) costs
+        // far more with the shear term: the crossing springs barely resist it. The thinned
+        // lips stay put.
+        let n = sheared.vertex_count();
+        let mut slid = rest.clone();
+        let tissue = &sheared.tissue;
+        for (v, p) in slid[..n].iter_mut().enumerate() {
+            if tissue.thickness_scale[v] < 1.0 {
+                continue;
+            }
+            let normal = tissue.normals[v];
+            let up = sub([0.0, 1.0, 0.0], scale(normal, normal[1]));
+            let along = scale(up, 1e-5 / norm(up));
+            *p = [p[0] + along[0], p[1] + along[1], p[2] + along[2]];
+        }
+        let cost = |m: &FaceModel| energy(m, &pose, &slid) - energy(m, &pose, &rest);
+        assert!(
+            cost(&sheared) > 5.0 * cost(&plain),
+            "{} J against {} J",
+            cost(&sheared),
+            cost(&plain)
+        );
+    }
+
+    fn check_derivatives(m: &FaceModel) {
         let mut a = Activations::neutral();
         for (name, v) in [
             ("zygomaticus_major_left", 0.8),
@@ -1249,9 +1363,9 @@ mod tests {
             a.set(name, v).unwrap();
         }
         let pose = m.pose(&a);
-        let mut ws = Workspace::new(&m);
+        let mut ws = Workspace::new(m);
         let mut rng = stream(7, "test/derivatives");
-        let mut x = rest_under(&m, &pose);
+        let mut x = rest_under(m, &pose);
         for (node, p) in x.iter_mut().enumerate() {
             if m.free[node] {
                 for c in p.iter_mut() {
@@ -1274,18 +1388,18 @@ mod tests {
             y
         };
         let h = 1e-7;
-        assemble(&m, &pose, &x, &mut ws, true, true);
+        assemble(m, &pose, &x, &mut ws, true, true);
         let g0 = ws.gradient.clone();
         let analytic: f64 = g0.iter().zip(&dir).map(|(g, d)| g * d).sum();
-        let numeric = (energy(&m, &pose, &moved(h)) - energy(&m, &pose, &moved(-h))) / (2.0 * h);
+        let numeric = (energy(m, &pose, &moved(h)) - energy(m, &pose, &moved(-h))) / (2.0 * h);
         assert!(
             (analytic - numeric).abs() <= 1e-6 * analytic.abs().max(1e-9),
             "directional derivative {analytic} vs finite difference {numeric}"
         );
         let hv = ws.hessian_times(&dir);
-        assemble(&m, &pose, &moved(h), &mut ws, false, false);
+        assemble(m, &pose, &moved(h), &mut ws, false, false);
         let gp = ws.gradient.clone();
-        assemble(&m, &pose, &moved(-h), &mut ws, false, false);
+        assemble(m, &pose, &moved(-h), &mut ws, false, false);
         let gm = ws.gradient.clone();
         let mut err = 0.0f64;
         let mut size = 0.0f64;

@@ -45,6 +45,21 @@ pub struct TissueParams {
     /// Crossing-spring stiffness as a fraction of the in-sheet stiffness of the same slab
     /// (shear resistance). Default 0.5.
     pub crossing_fraction: f64,
+    /// Shear modulus of each slab's prisms, as a fraction of the slab's incompressible value
+    /// E / 3: a compressible neo-Hookean term mu (|F|^2 / 2 - ln J) per prism, |F|^2 averaged
+    /// over its 18 tetrahedra and J its volume ratio, so the rest shape carries no stress.
+    /// Default 0 (off: the springs alone, as in LTW95 and every result under `results/`).
+    ///
+    /// The springs of a flat prism cannot resist the shear across its thickness: at
+    /// subdivision 0 an epidermis prism is ~15 mm wide and 1.5 mm thick, and the crossing
+    /// springs that should hold a surface node over the dermis node beneath it lie almost in
+    /// the sheet. A median vertex column has a vertical spring of 2,200 N/m (E A / h) and
+    /// ~130 N/m of lateral support (six crossing springs of 22.5 N/m), where the continuum
+    /// gives G A / h ~ 730 N/m; under about 0.1 mm of thickness compression the column tilts
+    /// over, a mesh-scale instability that stalls Newton's method (`facelab bench solve` counts the saddles it leaves). At 1
+    /// the term gives each slab its continuum shear stiffness (`bench solve
+    /// --shear-modulus-fraction 1`).
+    pub shear_modulus_fraction: f64,
     /// Volume-preservation modulus (Pa): energy kappa V0 (0.5 (J - 1)^2 + 0.2 (J - 1 - ln J)),
     /// J = V / V0, per prism (LTW95's volume constraint as a penalty, with a log barrier
     /// against inversion). Default 50 kPa, above the shear moduli: tissue is
@@ -74,6 +89,7 @@ impl Default for TissueParams {
             dermal_fatty_modulus: 10e3,
             muscle_layer_modulus: 5e3,
             crossing_fraction: 0.5,
+            shear_modulus_fraction: 0.0,
             volume_modulus: 50e3,
             skull_contact_stiffness: 5000.0,
             skull_clearance_fraction: 0.25,
@@ -98,6 +114,9 @@ pub struct Spring {
 pub struct Prism {
     pub nodes: [usize; 6],
     pub rest_volume: f64,
+    /// Gram matrix of the rest shape-function gradients, summed over the 18 tetrahedra
+    /// weighted by their share of the volume (see `prism_gram`).
+    pub gram: [[f64; 6]; 6],
 }
 
 /// The tetrahedra of a prism, as indices into its six nodes (top 0-2, bottom 3-5), all
@@ -209,6 +228,32 @@ pub fn prism_volume_derivatives(p: &[V3; 6]) -> (f64, [V3; 6], [[V3; 6]; 6]) {
         volume += dot(g[i], r[i]);
     }
     (volume / 3.0, g, q)
+}
+
+/// `S_ab = sum_t w V_t g_a . g_b` over the `PRISM_TETS` t (weight w = `PRISM_TET_WEIGHT`),
+/// with `V_t` the tetrahedron's volume and `g_a` the gradient of its linear shape function
+/// of node a, all at the rest positions `p`. Since a tetrahedron's deformation gradient is
+/// `F = sum_a x_a g_a^T`, `x^T S x / 2` (per coordinate) is the volume-weighted mean of
+/// `|F|^2 / 2`: a quadratic, rotation-invariant measure of distortion whose gradient at rest
+/// equals the prism's volume gradient. Rows sum to zero (translations cost nothing).
+pub fn prism_gram(p: &[V3; 6]) -> [[f64; 6]; 6] {
+    let mut s = [[0.0; 6]; 6];
+    for t in &PRISM_TETS {
+        let [a, b, c, d] = t.map(|i| p[i]);
+        let (e1, e2, e3) = (sub(b, a), sub(c, a), sub(d, a));
+        let det = dot(e1, cross(e2, e3));
+        let gb = scale(cross(e2, e3), 1.0 / det);
+        let gc = scale(cross(e3, e1), 1.0 / det);
+        let gd = scale(cross(e1, e2), 1.0 / det);
+        let g = [scale(add(add(gb, gc), gd), -1.0), gb, gc, gd];
+        let w = PRISM_TET_WEIGHT * det / 6.0;
+        for (i, gi) in g.iter().enumerate() {
+            for (j, gj) in g.iter().enumerate() {
+                s[t[i]][t[j]] += w * dot(*gi, *gj);
+            }
+        }
+    }
+    s
 }
 
 /// Signed volume of a prism from its six node positions: the mean of its six splits into
@@ -395,6 +440,7 @@ impl Tissue {
                 prisms.push(Prism {
                     nodes,
                     rest_volume: prism_volume(&p),
+                    gram: prism_gram(&p),
                 });
             }
         }
@@ -531,6 +577,36 @@ mod tests {
         let v = prism_volume(&p);
         assert!((v - tets).abs() < 1e-12, "{v} vs {tets}");
         assert!(v > 0.2, "a positive prism: {v}");
+    }
+
+    #[test]
+    fn gram_rows_sum_to_zero_and_its_rest_gradient_is_the_volume_gradient() {
+        let p = skewed_prism();
+        let s = prism_gram(&p);
+        let (_, dv, _) = prism_volume_derivatives(&p);
+        for a in 0..6 {
+            let size = s[a].iter().map(|v| v.abs()).fold(0.0, f64::max);
+            assert!(
+                s[a].iter().sum::<f64>().abs() <= 1e-12 * size,
+                "row {a}: {:?}",
+                s[a]
+            );
+            for b in 0..6 {
+                assert_eq!(s[a][b], s[b][a]);
+            }
+            // d/dx_a of sum_t w V_t |F_t|^2 / 2 at F = I is sum_t w V_t g_a = dV/dx_a.
+            let mut grad = [0.0; 3];
+            for (b, pb) in p.iter().enumerate() {
+                for c in 0..3 {
+                    grad[c] += s[a][b] * pb[c];
+                }
+            }
+            assert!(
+                norm(sub(grad, dv[a])) <= 1e-9 * norm(dv[a]),
+                "node {a}: {grad:?} against {:?}",
+                dv[a]
+            );
+        }
     }
 
     #[test]
