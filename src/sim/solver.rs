@@ -21,7 +21,8 @@ use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::amd;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
+    SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat, SymbolicSparseColMatRef};
@@ -357,32 +358,46 @@ impl Workspace {
         self.factor.len()
     }
 
-    /// Factorises the assembled Hessian and overwrites `step` with `-H^-1 gradient`.
-    /// Returns false if the matrix is not positive definite.
-    fn newton_step(&mut self) -> bool {
+    /// Factorises the assembled Hessian into `factor`. Returns false if the matrix is not
+    /// positive definite.
+    fn factorize(&mut self) -> bool {
         let mat = SparseColMatRef::new(self.pattern.matrix_pattern(), &self.values);
-        let llt = match self.pattern.cholesky.factorize_numeric_llt(
-            &mut self.factor,
-            mat,
-            Side::Lower,
-            LltRegularization::default(),
-            Par::Seq,
-            MemStack::new(&mut self.stack),
-            Default::default(),
-        ) {
-            Ok(llt) => llt,
-            Err(_) => return false,
-        };
-        for (s, g) in self.step.iter_mut().zip(&self.gradient) {
-            *s = -g;
-        }
-        let dof = self.pattern.dof;
-        llt.solve_in_place_with_conj(
+        self.pattern
+            .cholesky
+            .factorize_numeric_llt(
+                &mut self.factor,
+                mat,
+                Side::Lower,
+                LltRegularization::default(),
+                Par::Seq,
+                MemStack::new(&mut self.stack),
+                Default::default(),
+            )
+            .is_ok()
+    }
+
+    /// Overwrites `rhs` with `H^-1 rhs` from the last successful `factorize`.
+    fn solve_factored(&mut self, rhs: &mut [f64]) {
+        LltRef::new(&self.pattern.cholesky, &self.factor).solve_in_place_with_conj(
             Conj::No,
-            MatMut::from_column_major_slice_mut(&mut self.step, dof, 1),
+            MatMut::from_column_major_slice_mut(rhs, self.pattern.dof, 1),
             Par::Seq,
             MemStack::new(&mut self.stack),
         );
+    }
+
+    /// Factorises the assembled Hessian and overwrites `step` with `-H^-1 gradient`.
+    /// Returns false if the matrix is not positive definite.
+    fn newton_step(&mut self) -> bool {
+        if !self.factorize() {
+            return false;
+        }
+        let mut step = std::mem::take(&mut self.step);
+        for (s, g) in step.iter_mut().zip(&self.gradient) {
+            *s = -g;
+        }
+        self.solve_factored(&mut step);
+        self.step = step;
         self.step.iter().all(|v| v.is_finite())
     }
 
@@ -399,26 +414,11 @@ impl Workspace {
     /// `H^-1 v`, normalised, `iterations` times, so `v` turns toward the eigenvector of the
     /// smallest eigenvalue. Returns false if the matrix is not positive definite.
     fn inverse_iteration(&mut self, v: &mut [f64], iterations: usize) -> bool {
-        let mat = SparseColMatRef::new(self.pattern.matrix_pattern(), &self.values);
-        let Ok(llt) = self.pattern.cholesky.factorize_numeric_llt(
-            &mut self.factor,
-            mat,
-            Side::Lower,
-            LltRegularization::default(),
-            Par::Seq,
-            MemStack::new(&mut self.stack),
-            Default::default(),
-        ) else {
+        if !self.factorize() {
             return false;
-        };
-        let dof = self.pattern.dof;
+        }
         for _ in 0..iterations {
-            llt.solve_in_place_with_conj(
-                Conj::No,
-                MatMut::from_column_major_slice_mut(v, dof, 1),
-                Par::Seq,
-                MemStack::new(&mut self.stack),
-            );
+            self.solve_factored(v);
             let length = dot_slices(v, v).sqrt();
             if !length.is_finite() || length == 0.0 {
                 return false;
