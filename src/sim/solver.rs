@@ -510,22 +510,34 @@ fn skew(e: V3, s: f64) -> [[f64; 3]; 3] {
     ]
 }
 
-/// Shear modulus of the prisms of each slab (Pa), from `TissueParams::shear_modulus_fraction`.
-fn shear_moduli(model: &FaceModel) -> [f64; 3] {
+/// Shear modulus of prism `p` (Pa): its slab's Young's modulus times
+/// `TissueParams::shear_modulus_fraction / 3`.
+fn shear_modulus(model: &FaceModel, p: &super::tissue::Prism) -> f64 {
     let tp = &model.params.tissue;
-    [
+    let e = [
         tp.epidermis_modulus,
         tp.dermal_fatty_modulus,
         tp.muscle_layer_modulus,
-    ]
-    .map(|e| tp.shear_modulus_fraction * e / 3.0)
+    ][p.nodes[0] / model.vertex_count()];
+    tp.shear_modulus_fraction * e / 3.0
 }
 
-/// A prism's node positions relative to its first node: the Gram term is translation
-/// invariant, and small differences keep its sums accurate.
-fn relative(p: &super::tissue::Prism, x: &[V3]) -> [V3; 6] {
+/// The prism's node positions relative to its first node, `r`, and the Gram term's force on
+/// each node, `S r` (per coordinate): `x^T S x / 2 = sum_a r_a . (S r)_a / 2`. Relative
+/// positions are exact (rows of S sum to zero) and keep the sums free of cancellation.
+fn gram_forces(p: &super::tissue::Prism, x: &[V3]) -> ([V3; 6], [V3; 6]) {
     let origin = x[p.nodes[0]];
-    p.nodes.map(|i| sub(x[i], origin))
+    let r = p.nodes.map(|i| sub(x[i], origin));
+    let forces = p.gram.map(|row| {
+        let mut f = [0.0; 3];
+        for (s, rb) in row.iter().zip(&r) {
+            for d in 0..3 {
+                f[d] += s * rb[d];
+            }
+        }
+        f
+    });
+    (r, forces)
 }
 
 /// Total energy at `x` (J), or infinity if a prism is inverted (signed volume <= 0). A prism
@@ -544,7 +556,6 @@ fn energy(model: &FaceModel, pose: &Pose, x: &[V3]) -> f64 {
         )
         .0;
     }
-    let shear = shear_moduli(model);
     for p in &model.tissue.prisms {
         let volume = prism_volume(&p.nodes.map(|i| x[i]));
         if volume <= 0.0 {
@@ -554,15 +565,10 @@ fn energy(model: &FaceModel, pose: &Pose, x: &[V3]) -> f64 {
         e += tp.volume_modulus
             * p.rest_volume
             * (0.5 * (j - 1.0).powi(2) + VOLUME_BARRIER * (j - 1.0 - j.ln()));
-        let mu = shear[p.nodes[0] / model.vertex_count()];
+        let mu = shear_modulus(model, p);
         if mu > 0.0 {
-            let r = relative(p, x);
-            let mut distortion = 0.0;
-            for (a, ra) in r.iter().enumerate() {
-                for (b, rb) in r.iter().enumerate() {
-                    distortion += p.gram[a][b] * dot(*ra, *rb);
-                }
-            }
+            let (r, forces) = gram_forces(p, x);
+            let distortion: f64 = r.iter().zip(&forces).map(|(ra, fa)| dot(*ra, *fa)).sum();
             e += mu * (0.5 * distortion - p.rest_volume * j.ln());
         }
     }
@@ -603,7 +609,6 @@ fn assemble(
     full: bool,
 ) {
     let tp = &model.params.tissue;
-    let shear = shear_moduli(model);
     let pat = &ws.pattern;
     let g = &mut ws.gradient;
     let h = &mut ws.values;
@@ -662,21 +667,14 @@ fn assemble(
         let j = v / p.rest_volume;
         let mut coef = tp.volume_modulus * (j - 1.0 + VOLUME_BARRIER * (1.0 - 1.0 / j));
         let mut c = tp.volume_modulus * (1.0 + VOLUME_BARRIER / (j * j)) / p.rest_volume;
-        let mu = shear[p.nodes[0] / model.vertex_count()];
+        let mu = shear_modulus(model, p);
         if mu > 0.0 {
             // mu (x^T S x / 2 - V0 ln J): grad = mu S x - (mu / J) grad V,
             // hess = mu S (x) I + mu / (V0 J^2) grad V grad V^T - (mu / J) hess V.
             coef -= mu / j;
             c += mu / (p.rest_volume * j * j);
-            let r = relative(p, x);
-            for (a, row) in p.gram.iter().enumerate() {
-                let mut f = [0.0; 3];
-                for (s, rb) in row.iter().zip(&r) {
-                    for d in 0..3 {
-                        f[d] += s * rb[d];
-                    }
-                }
-                add_grad(g, p.nodes[a], f, mu);
+            for (&node, f) in p.nodes.iter().zip(gram_forces(p, x).1) {
+                add_grad(g, node, f, mu);
             }
             if hessian {
                 for a in 0..6 {

@@ -56,9 +56,9 @@ pub struct TissueParams {
     /// the sheet. A median vertex column has a vertical spring of 2,200 N/m (E A / h) and
     /// ~130 N/m of lateral support (six crossing springs of 22.5 N/m), where the continuum
     /// gives G A / h ~ 730 N/m; under about 0.1 mm of thickness compression the column tilts
-    /// over, a mesh-scale instability that stalls Newton's method (`facelab bench solve` counts the saddles it leaves). At 1
-    /// the term gives each slab its continuum shear stiffness (`bench solve
-    /// --shear-modulus-fraction 1`).
+    /// over, a mesh-scale instability that stalls Newton's method (`facelab bench solve`
+    /// counts the saddles it leaves). At 1 the term gives each slab its continuum shear
+    /// stiffness (`bench solve --shear-modulus-fraction 1`).
     pub shear_modulus_fraction: f64,
     /// Volume-preservation modulus (Pa): energy kappa V0 (0.5 (J - 1)^2 + 0.2 (J - 1 - ln J)),
     /// J = V / V0, per prism (LTW95's volume constraint as a penalty, with a log barrier
