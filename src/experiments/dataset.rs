@@ -41,6 +41,9 @@ pub struct DatasetParams {
     pub subdivisions: u8,
     /// Solver convergence tolerance (relative residual). Default `SolveParams` default.
     pub tolerance: f64,
+    /// Shear modulus of the tissue prisms as a fraction of E / 3
+    /// (`TissueParams::shear_modulus_fraction`). Default 1.
+    pub shear_modulus_fraction: f64,
     pub start: SolveStart,
     /// Seed of the samples' streams; separate from the training seeds so that every seed
     /// trains on the same, once-simulated pairs. Default 1.
@@ -54,6 +57,8 @@ impl Default for DatasetParams {
             test_fraction: 0.2,
             subdivisions: 0,
             tolerance: crate::sim::SolveParams::default().tolerance,
+            shear_modulus_fraction: crate::sim::tissue::TissueParams::default()
+                .shear_modulus_fraction,
             start: SolveStart::Predicted,
             seed: 1,
         }

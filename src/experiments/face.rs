@@ -28,6 +28,15 @@ pub struct FaceSource {
 }
 
 impl FaceSource {
+    /// The default mesh and weights with the face keys of a spec's `[dataset]`.
+    pub fn of_spec(spec: &crate::spec::Spec) -> FaceSource {
+        FaceSource {
+            subdivisions: spec.dataset.subdivisions,
+            shear_modulus_fraction: Some(spec.dataset.shear_modulus_fraction),
+            ..FaceSource::default()
+        }
+    }
+
     pub fn model(&self) -> Result<FaceModel> {
         if let Some(f) = self.shear_modulus_fraction {
             if !(f.is_finite() && f >= 0.0) {

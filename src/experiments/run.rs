@@ -129,8 +129,9 @@ fn keys(spec: &Spec, a: &Assets) -> Keys {
         spec.dataset.start == SolveStart::Predicted || spec.tables.iter().any(|t| t == "inversion");
     let basis = needs_basis.then(|| {
         let v = format!(
-            "{face}dataset.subdivisions = {}\ndataset.tolerance = {}\n",
-            spec.dataset.subdivisions, spec.dataset.tolerance
+            "{face}dataset.subdivisions = {}\ndataset.tolerance = {}\n\
+             dataset.shear_modulus_fraction = {}\n",
+            spec.dataset.subdivisions, spec.dataset.tolerance, spec.dataset.shear_modulus_fraction
         );
         cache::key("basis", BASIS_VERSION, &v, &[])
     });
@@ -319,10 +320,7 @@ fn run_cell(
     let spec = &cell.spec;
     let k = keys(spec, a);
     let mut record = recorder(&cell.name, records);
-    let source = FaceSource {
-        subdivisions: spec.dataset.subdivisions,
-        ..FaceSource::default()
-    };
+    let source = FaceSource::of_spec(spec);
 
     // Dataset (and the basis it starts from).
     let t = Instant::now();
@@ -777,10 +775,7 @@ fn headpose_outputs(
                 .join(format!("{report}headpose.md")),
             headpose::markdown(&out, spec).as_bytes(),
         )?;
-        let source = FaceSource {
-            subdivisions: spec.dataset.subdivisions,
-            ..FaceSource::default()
-        };
+        let source = FaceSource::of_spec(spec);
         let figures = out_root.join("figures").join(format!("{report}headpose"));
         headpose::figures(&figures, &out, spec, &source.model()?)?;
     }

@@ -85,7 +85,12 @@ pub fn run(
         &format!(
             "{}{}",
             inp.assets,
-            values(&["cohort.", "dataset.subdivisions", "dataset.tolerance"])
+            values(&[
+                "cohort.",
+                "dataset.subdivisions",
+                "dataset.tolerance",
+                "dataset.shear_modulus_fraction"
+            ])
         ),
         &[],
     );

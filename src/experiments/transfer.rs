@@ -158,10 +158,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     };
     let acts = predict_activations(&mlp, map.as_ref(), &reference)?;
 
-    let source = FaceSource {
-        subdivisions: spec.dataset.subdivisions,
-        ..FaceSource::default()
-    };
+    let source = FaceSource::of_spec(&spec);
     let model = source.model()?;
     let observer = model_observer(
         &model,

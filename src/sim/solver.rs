@@ -1213,6 +1213,14 @@ mod tests {
         FaceModel::new(&mesh, FaceParams::default()).unwrap()
     }
 
+    /// LTW95's springs without the prisms' shear term.
+    fn springs_only_model() -> FaceModel {
+        let mesh = read_obj(&default_mesh_path()).unwrap();
+        let mut params = FaceParams::default();
+        params.tissue.shear_modulus_fraction = 0.0;
+        FaceModel::new(&mesh, params).unwrap()
+    }
+
     #[test]
     fn softest_mode_is_an_eigenpair_below_every_rayleigh_quotient() {
         let m = model();
@@ -1228,7 +1236,7 @@ mod tests {
         let (state, _) = solve_from_rest(&m, &a, &mut ws, &SolveParams::default()).unwrap();
         let mut rng = stream(3, "test/softest_mode");
         for exact in [true, false] {
-            let mode = softest_mode(&m, &state, &mut ws, exact, 80).expect("a finite Hessian");
+            let mode = softest_mode(&m, &state, &mut ws, exact, 200).expect("a finite Hessian");
             assert!(mode.stiffness > 0.0, "{mode:?}");
             assert!(mode.eigen_residual < 1e-2, "{mode:?}");
             assert!((0.0..=1.0 + 1e-12).contains(&mode.vertex_share), "{mode:?}");
@@ -1249,8 +1257,9 @@ mod tests {
     #[test]
     fn a_negative_softest_mode_is_negative_curvature_of_the_energy() {
         // Every free node drawn 2% toward the face's centre compresses the springs; their
-        // geometric stiffness then makes the exact Hessian indefinite.
-        let m = model();
+        // geometric stiffness then makes the exact Hessian indefinite (without the prisms'
+        // shear term, which holds the compressed columns upright).
+        let m = springs_only_model();
         let mut state = m.rest_state();
         let count = state.positions.len() as f64;
         let centre = state.positions.iter().fold([0.0; 3], |c, p| {
@@ -1299,21 +1308,14 @@ mod tests {
         check_derivatives(&model());
     }
 
-    fn sheared_model() -> FaceModel {
-        let mesh = read_obj(&default_mesh_path()).unwrap();
-        let mut params = FaceParams::default();
-        params.tissue.shear_modulus_fraction = 1.0;
-        FaceModel::new(&mesh, params).unwrap()
-    }
-
     #[test]
-    fn gradient_and_hessian_match_finite_differences_with_prism_shear() {
-        check_derivatives(&sheared_model());
+    fn gradient_and_hessian_match_finite_differences_without_prism_shear() {
+        check_derivatives(&springs_only_model());
     }
 
     #[test]
     fn prism_shear_leaves_the_rest_face_unstressed_and_stiffens_it() {
-        let (plain, sheared) = (model(), sheared_model());
+        let (plain, sheared) = (springs_only_model(), model());
         let a = Activations::neutral();
         let pose = sheared.pose(&a);
         let rest = rest_under(&sheared, &pose);

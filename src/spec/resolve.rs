@@ -376,6 +376,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         tables.push("table1".into());
     }
 
+    let nonneg = |v: f64| (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"));
     let d = DatasetParams::default();
     let dataset = DatasetParams {
         pairs_per_expression: r.integer(
@@ -391,11 +392,15 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         tolerance: r.float("dataset.tolerance", d.tolerance, &|v| {
             (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
         })?,
+        shear_modulus_fraction: r.float(
+            "dataset.shear_modulus_fraction",
+            d.shear_modulus_fraction,
+            &nonneg,
+        )?,
         start: SolveStart::parse(&r.choice("dataset.start", d.start.name(), &SolveStart::NAMES)?)
             .expect("choice checked"),
         seed: r.integer("dataset.seed", d.seed as i64, 0, i64::MAX)? as u64,
     };
-    let nonneg = |v: f64| (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"));
     let observer = ObserverNoise {
         noise_sd: r.float("observer.noise_sd", 0.0, &nonneg)?,
         gain_spread: r.float("observer.gain_spread", 0.0, &nonneg)?,
