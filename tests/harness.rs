@@ -72,6 +72,13 @@ fn spec_errors_name_file_line_column_and_key() {
         e.contains("dataset.test_fraction") && e.contains("(0, 1)"),
         "{e}"
     );
+    let e = spec_error("[dataset]\nshear_modulus_fraction = -1\n", &[]);
+    assert!(
+        e.contains("s.toml:2:1")
+            && e.contains("dataset.shear_modulus_fraction")
+            && e.contains(">= 0"),
+        "{e}"
+    );
     let e = spec_error("[sweep]\n\"train.epoch\" = [1, 2]\n", &[]);
     assert!(
         e.contains("s.toml:2") && e.contains("sweep") && e.contains("train.epoch"),
@@ -204,6 +211,16 @@ fn a_killed_run_resumes_and_finishes_with_the_same_outputs() {
     std::thread::sleep(std::time::Duration::from_millis(1500));
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
+    // The killed run's folder says it did not finish.
+    let folders = |results: &Path| -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(results.join("smoke"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(folders(&results), ["run-0001.partial"]);
     // No half-written file anywhere: every cache entry that exists verifies.
     let resumed = run_smoke(&results, &sets);
     assert!(
@@ -218,6 +235,10 @@ fn a_killed_run_resumes_and_finishes_with_the_same_outputs() {
             assert!(!name.starts_with(".tmp-"), "stale {name}");
         }
     }
+    assert_eq!(
+        folders(&results),
+        ["latest", "run-0001.partial", "run-0002"]
+    );
     for file in ["table1.csv", "curves.csv"] {
         assert_eq!(
             latest(&results, file),

@@ -11,6 +11,7 @@
 //!
 //! Each run writes `results/<experiment>/run-NNNN/` (one subfolder per sweep cell) with the
 //! resolved `spec.toml`, `manifest.json` and CSVs; `results/<experiment>/latest` points at it.
+//! Until the manifest is written the folder is `run-NNNN.partial`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -695,16 +696,19 @@ fn git(args: &[&str]) -> Option<String> {
         .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
-/// A new `run-NNNN` folder; concurrent runs each get their own.
+/// A new run folder, `run-NNNN.partial` until `finish_run_dir` names it `run-NNNN`: a run that
+/// fails or is killed leaves no folder that looks finished. Concurrent runs each get their own
+/// number.
 fn new_run_dir(experiment_dir: &Path) -> Result<PathBuf> {
     std::fs::create_dir_all(experiment_dir)
         .with_context(|| format!("{}: cannot create", experiment_dir.display()))?;
     let mut n = std::fs::read_dir(experiment_dir)?
         .filter_map(|e| e.ok())
         .filter_map(|e| {
-            e.file_name()
-                .to_str()?
-                .strip_prefix("run-")?
+            let name = e.file_name();
+            let name = name.to_str()?.strip_prefix("run-")?;
+            name.strip_suffix(PARTIAL)
+                .unwrap_or(name)
                 .parse::<u32>()
                 .ok()
         })
@@ -712,13 +716,32 @@ fn new_run_dir(experiment_dir: &Path) -> Result<PathBuf> {
         .unwrap_or(0);
     loop {
         n += 1;
-        let dir = experiment_dir.join(format!("run-{n:04}"));
+        if experiment_dir.join(format!("run-{n:04}")).exists() {
+            continue;
+        }
+        let dir = experiment_dir.join(format!("run-{n:04}{PARTIAL}"));
         match std::fs::create_dir(&dir) {
             Ok(()) => return Ok(dir),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             Err(e) => return Err(e).with_context(|| format!("{}: cannot create", dir.display())),
         }
     }
+}
+
+/// Suffix of a run folder whose run has not finished.
+const PARTIAL: &str = ".partial";
+
+/// Renames a finished run's folder to `run-NNNN` and returns the new path.
+fn finish_run_dir(partial: &Path) -> Result<PathBuf> {
+    let name = partial
+        .file_name()
+        .and_then(|n| n.to_str())
+        .and_then(|n| n.strip_suffix(PARTIAL))
+        .context("a partial run folder's name ends in .partial")?;
+    let done = partial.with_file_name(name);
+    std::fs::rename(partial, &done)
+        .with_context(|| format!("{}: cannot rename to {name}", partial.display()))?;
+    Ok(done)
 }
 
 fn point_latest(experiment_dir: &Path, run: &Path) -> Result<()> {
@@ -971,6 +994,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         &run_dir.join("manifest.json"),
         serde_json::to_string_pretty(&manifest)?.as_bytes(),
     )?;
+    let run_dir = finish_run_dir(&run_dir)?;
     point_latest(&experiment_dir, &run_dir)?;
     Ok(RunSummary {
         dir: run_dir,
