@@ -16,6 +16,16 @@ pub(super) fn register_font() {
     });
 }
 
+/// A curve's legend entry: a short line from 0 to 24 px, with a gap from `.0` to `.1` when the
+/// curve is dashed.
+fn legend_gap(dashed: bool) -> (i32, i32) {
+    if dashed {
+        (9, 15)
+    } else {
+        (12, 12)
+    }
+}
+
 /// A named curve.
 pub struct Series {
     pub label: String,
@@ -68,6 +78,8 @@ pub fn log_curves(path: &Path, title: &str, y_label: &str, series: &[Series]) ->
         chart
             .configure_mesh()
             .x_desc("epoch")
+            // At most one label per epoch: short runs otherwise repeat rounded labels.
+            .x_labels(epochs.min(11))
             .x_label_formatter(&|v| format!("{v:.0}"))
             .y_desc(y_label)
             .label_style(("sans-serif", 18))
@@ -88,9 +100,11 @@ pub fn log_curves(path: &Path, title: &str, y_label: &str, series: &[Series]) ->
             } else {
                 chart.draw_series(LineSeries::new(points, style))?
             };
-            let color = s.color;
+            let (style, (a, b)) = (s.color.stroke_width(3), legend_gap(s.dashed));
             drawn.label(s.label.clone()).legend(move |(x, y)| {
-                PathElement::new([(x, y), (x + 24, y)], color.stroke_width(3))
+                EmptyElement::at((x, y))
+                    + PathElement::new([(0, 0), (a, 0)], style)
+                    + PathElement::new([(b, 0), (24, 0)], style)
             });
         }
         chart
@@ -320,9 +334,11 @@ pub fn line_panels(path: &Path, title: &str, panels: &[Panel]) -> Result<()> {
                 } else {
                     chart.draw_series(LineSeries::new(s.points.clone(), style))?
                 };
-                let color = s.color;
+                let (style, (a, b)) = (s.color.stroke_width(3), legend_gap(s.dashed));
                 drawn.label(s.label.clone()).legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 24, y)], color.stroke_width(3))
+                    EmptyElement::at((x, y))
+                        + PathElement::new([(0, 0), (a, 0)], style)
+                        + PathElement::new([(b, 0), (24, 0)], style)
                 });
             }
             chart
