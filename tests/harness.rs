@@ -314,23 +314,38 @@ fn manifest_names_the_commit_and_a_clean_checkout_whatever_the_run_writes_into_i
     git(&["init", "-q"]);
     git(&["commit", "-q", "--allow-empty", "-m", "start"]);
     let head = git(&["rev-parse", "HEAD"]);
-    let run = Command::new(env!("CARGO_BIN_EXE_facelab"))
-        .args(["run", &smoke(), "--results", "results"])
-        .args(["--set", "tables=[\"table1\"]"])
-        .current_dir(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let run = || {
+        let out = Command::new(env!("CARGO_BIN_EXE_facelab"))
+            .args(["run", &smoke(), "--results", "results"])
+            .args(["--set", "tables=[\"table1\"]"])
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    run();
     assert!(
         !git(&["status", "--porcelain"]).is_empty(),
         "the run wrote nothing into the checkout"
     );
-    let text = std::fs::read_to_string(dir.join("results/smoke/latest/manifest.json")).unwrap();
-    let manifest: serde_json::Value = serde_json::from_str(&text).unwrap();
-    assert_eq!(manifest["git_revision"], head.as_str(), "{text}");
-    assert_eq!(manifest["git_dirty"], false, "{text}");
+    let manifest = || -> (serde_json::Value, String) {
+        let text = std::fs::read_to_string(dir.join("results/smoke/latest/manifest.json")).unwrap();
+        (serde_json::from_str(&text).unwrap(), text)
+    };
+    let (m, text) = manifest();
+    assert_eq!(m["git_revision"], head.as_str(), "{text}");
+    assert_eq!(m["git_dirty"], false, "{text}");
+    // Nor do an earlier run's outputs make the next run's checkout look modified; anything
+    // else does.
+    run();
+    let (m, text) = manifest();
+    assert_eq!(m["git_dirty"], false, "{text}");
+    std::fs::write(dir.join("notes.txt"), "an uncommitted change").unwrap();
+    run();
+    let (m, text) = manifest();
+    assert_eq!(m["git_dirty"], true, "{text}");
 }

@@ -696,6 +696,28 @@ fn git(args: &[&str]) -> Option<String> {
         .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
+/// Whether the checkout differs from its commit, outputs aside: what runs write (`outputs`,
+/// where they lie inside the checkout) is not a change to what produced them, so a run after
+/// another in the same checkout still counts as clean.
+fn checkout_dirty(outputs: &[PathBuf]) -> Option<bool> {
+    let top = PathBuf::from(git(&["rev-parse", "--show-toplevel"])?);
+    let mut args: Vec<String> = ["status", "--porcelain", "--", ":/"]
+        .map(String::from)
+        .into();
+    for path in outputs {
+        let Ok(abs) = std::path::absolute(path) else {
+            continue;
+        };
+        if let Ok(rel) = abs.strip_prefix(&top) {
+            if !rel.as_os_str().is_empty() {
+                args.push(format!(":(top,exclude){}", rel.display()));
+            }
+        }
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    git(&args).map(|s| !s.is_empty())
+}
+
 /// A new run folder, `run-NNNN.partial` until `finish_run_dir` names it `run-NNNN`: a run that
 /// fails or is killed leaves no folder that looks finished. Concurrent runs each get their own
 /// number.
@@ -818,10 +840,12 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_else(|| PathBuf::from("."));
-    // Provenance is read before the run writes anything: its own new outputs in a checkout
-    // would otherwise always count as uncommitted changes.
     let git_revision = git(&["rev-parse", "HEAD"]).unwrap_or_else(|| "unknown".into());
-    let git_dirty = git(&["status", "--porcelain"]).map(|s| !s.is_empty());
+    let git_dirty = checkout_dirty(&[
+        opts.results.clone(),
+        out_root.join("figures"),
+        out_root.join("paper-tables"),
+    ]);
     let run_dir = new_run_dir(&experiment_dir)?;
     let mut records = Vec::new();
     let mut outputs: BTreeMap<String, String> = BTreeMap::new();
