@@ -998,7 +998,12 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 .join(format!("{experiment}.md")),
             md.as_bytes(),
         )?;
-        sweep_figure(&out_root.join("figures").join(&experiment), &sweep_rows)?;
+        let dir = out_root.join("figures").join(&experiment);
+        sweep_figure(&dir, &sweep_rows)?;
+        if !sweep_table2.is_empty() {
+            let names: Vec<&str> = sweep_table2.iter().map(|(n, _)| n.as_str()).collect();
+            table2_stage::sweep_figure(&dir, &sweep_table2, &sweep_labels(&names).1)?;
+        }
     }
     let manifest = serde_json::json!({
         "facelab_version": env!("CARGO_PKG_VERSION"),
@@ -1076,23 +1081,26 @@ fn table1_figures(dir: &Path, result: &CellResult) -> Result<()> {
 }
 
 /// Bars of MSE_All and the mean per-expression MSE for each cell, labelled by its values.
-fn sweep_figure(dir: &Path, rows: &[(String, Vec<Row>)]) -> Result<()> {
-    use crate::report::figures::{grouped_bars, PALETTE};
-    let values_of = |name: &str, part: usize| -> String {
+/// A sweep's swept keys (`a / b`) and each cell's values (`1/2`), from cell names `a=1,b=2`.
+fn sweep_labels(names: &[&str]) -> (String, Vec<String>) {
+    let part = |name: &str, value: bool| -> String {
         name.split(',')
             .map(|kv| {
-                kv.split_once('=').map_or(kv.to_string(), |(k, v)| {
-                    if part == 0 {
-                        k.into()
-                    } else {
-                        v.into()
-                    }
-                })
+                kv.split_once('=')
+                    .map_or(kv, |(k, v)| if value { v } else { k })
+                    .to_string()
             })
             .collect::<Vec<_>>()
-            .join(if part == 0 { " / " } else { "/" })
+            .join(if value { "/" } else { " / " })
     };
-    let labels: Vec<String> = rows.iter().map(|(name, _)| values_of(name, 1)).collect();
+    let keys = names.first().map(|n| part(n, false)).unwrap_or_default();
+    (keys, names.iter().map(|n| part(n, true)).collect())
+}
+
+fn sweep_figure(dir: &Path, rows: &[(String, Vec<Row>)]) -> Result<()> {
+    use crate::report::figures::{grouped_bars, PALETTE};
+    let names: Vec<&str> = rows.iter().map(|(n, _)| n.as_str()).collect();
+    let (keys, labels) = sweep_labels(&names);
     let all: Vec<f64> = rows
         .iter()
         .map(|(_, r)| stats::mean(&r.iter().map(|x| x.all).collect::<Vec<_>>()))
@@ -1107,10 +1115,6 @@ fn sweep_figure(dir: &Path, rows: &[(String, Vec<Row>)]) -> Result<()> {
             )
         })
         .collect();
-    let keys = rows
-        .first()
-        .map(|(name, _)| values_of(name, 0))
-        .unwrap_or_default();
     grouped_bars(
         &dir.join("sweep.png"),
         &format!("Test MSE by {keys}"),

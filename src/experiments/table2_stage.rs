@@ -678,6 +678,44 @@ pub fn frames_csv(reference: &[RefFrame], first: &[(Setting, Vec<Transferred>)])
 
 /// Table 2 over a sweep: per cell, each cohort's mean AU MSE (over 17 AUs, mean over seeds)
 /// unnormalized and normalized.
+/// The mean AU MSE over the 17 AUs and the seeds of one cohort and setting.
+fn mean_over_aus(s: &[Summary], kind: CohortKind, setting: Setting) -> f64 {
+    s.iter()
+        .find(|r| r.key == (kind, setting))
+        .map_or(f64::NAN, |r| r.mean[AU_COUNT])
+}
+
+/// `sweep_table2.png`: each cell's mean AU MSE per cohort and setting, the figure of a sweep
+/// over Table 2's keys (whose Table 1 stays the same in every cell).
+pub fn sweep_figure(
+    dir: &std::path::Path,
+    cells: &[(String, Vec<Row>)],
+    labels: &[String],
+) -> Result<()> {
+    use crate::report::figures::{grouped_bars, PALETTE};
+    let summaries: Vec<Vec<Summary>> = cells.iter().map(|(_, rows)| summary(rows)).collect();
+    let mut groups = Vec::new();
+    for (i, k) in CohortKind::ALL.into_iter().enumerate() {
+        for (j, setting) in Setting::ALL.into_iter().enumerate() {
+            groups.push((
+                format!("{}, {}", k.name().replace('_', " "), setting.name()),
+                PALETTE[(2 * i + j) % PALETTE.len()],
+                summaries
+                    .iter()
+                    .map(|s| mean_over_aus(s, k, setting))
+                    .collect(),
+            ));
+        }
+    }
+    grouped_bars(
+        &dir.join("sweep_table2.png"),
+        "Table 2: mean AU MSE over 17 AUs",
+        "AU MSE (mean over seeds)",
+        labels,
+        &groups,
+    )
+}
+
 pub fn sweep_markdown(cells: &[(String, Vec<Row>)]) -> String {
     let mut out = String::from(
         "\n## Table 2: mean AU MSE over 17 AUs (unnormalized / normalized)\n\n| cell |",
@@ -691,11 +729,7 @@ pub fn sweep_markdown(cells: &[(String, Vec<Row>)]) -> String {
     ));
     for (name, rows) in cells {
         let s = summary(rows);
-        let mean = |k: CohortKind, setting: Setting| -> f64 {
-            s.iter()
-                .find(|r| r.key == (k, setting))
-                .map_or(f64::NAN, |r| r.mean[AU_COUNT])
-        };
+        let mean = |k, setting| mean_over_aus(&s, k, setting);
         out.push_str(&format!("| {name} |"));
         for k in CohortKind::ALL {
             out.push_str(&format!(

@@ -16,6 +16,19 @@ pub(super) fn register_font() {
     });
 }
 
+/// A log axis label: only 1, 2 and 5 times a power of ten, so labels never crowd.
+fn log_label(v: &f64) -> String {
+    let mantissa = v / 10f64.powf(v.log10().floor());
+    let nice = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .any(|m| (mantissa - m).abs() < 1e-6 * m);
+    if nice {
+        format!("{v:.0e}")
+    } else {
+        String::new()
+    }
+}
+
 /// A curve's legend entry: a short line from 0 to 24 px, with a gap from `.0` to `.1` when the
 /// curve is dashed.
 fn legend_gap(dashed: bool) -> (i32, i32) {
@@ -84,7 +97,8 @@ pub fn log_curves(path: &Path, title: &str, y_label: &str, series: &[Series]) ->
             .y_desc(y_label)
             .label_style(("sans-serif", 18))
             .axis_desc_style(("sans-serif", 20))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&log_label)
+            .y_max_light_lines(1)
             .draw()?;
         for s in series {
             let points: Vec<(f64, f64)> = s
@@ -164,7 +178,8 @@ pub fn grouped_bars(
                 }
             })
             .y_desc(y_label)
-            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&log_label)
+            .y_max_light_lines(1)
             .label_style(("sans-serif", 18))
             .axis_desc_style(("sans-serif", 20))
             .draw()?;
