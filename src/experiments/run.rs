@@ -2,7 +2,7 @@
 //!
 //! Stages and what their keys hash (besides the stage name and version):
 //! - `basis` (only with `dataset.start = "predicted"`): the face assets, `dataset.subdivisions`,
-//!   `dataset.tolerance`;
+//!   `dataset.tolerance`, `dataset.shear_modulus_fraction`;
 //! - `dataset`: the basis key, the face, expression and calibration files, `dataset.*`,
 //!   `observer.*`;
 //! - `train` (per seed and network): the dataset key, `model.*`, `train.*`,
