@@ -326,8 +326,11 @@ pub fn line_panels(path: &Path, title: &str, panels: &[Panel]) -> Result<()> {
             if x0 > x1 {
                 (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
             }
+            // Headroom above the curves for the legend (about 19 px per entry of a ~370 px
+            // plot), so it never covers one.
             let pad = ((y1 - y0) * 0.08).max(1e-9);
-            let (y0, y1) = (y0 - pad, y1 + 3.0 * pad);
+            let legend = ((panel.series.len() as f64 * 19.0 + 20.0) / 370.0).min(0.6);
+            let (y0, y1) = (y0 - pad, y0 - pad + (y1 - y0 + 2.0 * pad) / (1.0 - legend));
             let x1 = if x1 > x0 { x1 } else { x0 + 1.0 };
             let mut chart = ChartBuilder::on(area)
                 .caption(&panel.title, ("sans-serif", 21))
