@@ -225,12 +225,16 @@ pub fn bench_solve(
             t.elapsed().as_secs_f64(),
             "s",
         )?;
-        let mut predicted_iterations = 0;
+        let mut predicted_iterations = Vec::with_capacity(count);
+        let mut fallbacks = 0;
         let mut predicted_states = Vec::with_capacity(count);
         let t = Instant::now();
         for a in &batch {
             let (state, r) = solve_predicted(&model, &basis, a, &mut ws, &params)?;
-            predicted_iterations += r.iterations;
+            predicted_iterations.push(r.iterations as f64);
+            // More than one piece: Newton from the prediction failed and the solve went
+            // the continuation path from rest.
+            fallbacks += usize::from(r.pieces > 1);
             predicted_states.push(state);
         }
         let predicted = t.elapsed().as_secs_f64() / count as f64;
@@ -243,7 +247,19 @@ pub fn bench_solve(
         line(
             out,
             &format!("{p}.predicted_iterations_per_sample"),
-            predicted_iterations as f64 / count as f64,
+            predicted_iterations.iter().sum::<f64>() / count as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.predicted_iterations_median"),
+            median(&mut predicted_iterations),
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.predicted_fallbacks_to_continuation"),
+            fallbacks as f64,
             "count",
         )?;
         let mut apart = 0.0f64;
