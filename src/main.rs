@@ -43,8 +43,8 @@ struct FaceArgs {
     /// Loop subdivision levels (0, 1 or 2)
     #[arg(long, default_value_t = 0)]
     subdivisions: u8,
-    /// Shear modulus of the tissue prisms as a fraction of E/3 (0 = springs alone, the
-    /// default; 1 = the layers' continuum shear stiffness)
+    /// Shear modulus of the tissue prisms as a fraction of E/3 [default: 1, the layers'
+    /// continuum shear stiffness; 0 = springs alone]
     #[arg(long)]
     shear_modulus_fraction: Option<f64>,
 }

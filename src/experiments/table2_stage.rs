@@ -676,8 +676,6 @@ pub fn frames_csv(reference: &[RefFrame], first: &[(Setting, Vec<Transferred>)])
     out
 }
 
-/// Table 2 over a sweep: per cell, each cohort's mean AU MSE (over 17 AUs, mean over seeds)
-/// unnormalized and normalized.
 /// The mean AU MSE over the 17 AUs and the seeds of one cohort and setting.
 fn mean_over_aus(s: &[Summary], kind: CohortKind, setting: Setting) -> f64 {
     s.iter()
@@ -716,6 +714,8 @@ pub fn sweep_figure(
     )
 }
 
+/// Table 2 over a sweep: per cell, each cohort's mean AU MSE (over 17 AUs, mean over seeds)
+/// unnormalized and normalized.
 pub fn sweep_markdown(cells: &[(String, Vec<Row>)]) -> String {
     let mut out = String::from(
         "\n## Table 2: mean AU MSE over 17 AUs (unnormalized / normalized)\n\n| cell |",

@@ -29,14 +29,34 @@ fn log_label(v: &f64) -> String {
     }
 }
 
-/// A curve's legend entry: a short line from 0 to 24 px, with a gap from `.0` to `.1` when the
-/// curve is dashed.
-fn legend_gap(dashed: bool) -> (i32, i32) {
-    if dashed {
-        (9, 15)
+/// Draws one curve, solid or dashed, with a legend entry drawn the same way: a 24 px line,
+/// broken in the middle when dashed.
+fn draw_curve<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    points: Vec<(f64, f64)>,
+    color: RGBColor,
+    dashed: bool,
+    label: &str,
+) -> Result<()>
+where
+    DB: DrawingBackend + 'a,
+    DB::ErrorType: 'static,
+    CT: CoordTranslate<From = (f64, f64)>,
+{
+    let style = ShapeStyle::from(&color).stroke_width(2);
+    let drawn = if dashed {
+        chart.draw_series(DashedLineSeries::new(points, 8, 5, style))?
     } else {
-        (12, 12)
-    }
+        chart.draw_series(LineSeries::new(points, style))?
+    };
+    let (gap_from, gap_to) = if dashed { (9, 15) } else { (12, 12) };
+    let style = color.stroke_width(3);
+    drawn.label(label).legend(move |(x, y)| {
+        EmptyElement::at((x, y))
+            + PathElement::new([(0, 0), (gap_from, 0)], style)
+            + PathElement::new([(gap_to, 0), (24, 0)], style)
+    });
+    Ok(())
 }
 
 /// A named curve.
@@ -108,18 +128,7 @@ pub fn log_curves(path: &Path, title: &str, y_label: &str, series: &[Series]) ->
                 .filter(|(_, v)| **v > 0.0)
                 .map(|(i, v)| ((i + 1) as f64, *v))
                 .collect();
-            let style = ShapeStyle::from(&s.color).stroke_width(2);
-            let drawn = if s.dashed {
-                chart.draw_series(DashedLineSeries::new(points, 8, 5, style))?
-            } else {
-                chart.draw_series(LineSeries::new(points, style))?
-            };
-            let (style, (a, b)) = (s.color.stroke_width(3), legend_gap(s.dashed));
-            drawn.label(s.label.clone()).legend(move |(x, y)| {
-                EmptyElement::at((x, y))
-                    + PathElement::new([(0, 0), (a, 0)], style)
-                    + PathElement::new([(b, 0), (24, 0)], style)
-            });
+            draw_curve(&mut chart, points, s.color, s.dashed, &s.label)?;
         }
         chart
             .configure_series_labels()
@@ -346,18 +355,7 @@ pub fn line_panels(path: &Path, title: &str, panels: &[Panel]) -> Result<()> {
                 .axis_desc_style(("sans-serif", 18))
                 .draw()?;
             for s in &panel.series {
-                let style = ShapeStyle::from(&s.color).stroke_width(2);
-                let drawn = if s.dashed {
-                    chart.draw_series(DashedLineSeries::new(s.points.clone(), 8, 5, style))?
-                } else {
-                    chart.draw_series(LineSeries::new(s.points.clone(), style))?
-                };
-                let (style, (a, b)) = (s.color.stroke_width(3), legend_gap(s.dashed));
-                drawn.label(s.label.clone()).legend(move |(x, y)| {
-                    EmptyElement::at((x, y))
-                        + PathElement::new([(0, 0), (a, 0)], style)
-                        + PathElement::new([(b, 0), (24, 0)], style)
-                });
+                draw_curve(&mut chart, s.points.clone(), s.color, s.dashed, &s.label)?;
             }
             chart
                 .configure_series_labels()
