@@ -12,6 +12,7 @@ use facelab::experiments::bench::{
 };
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
 use facelab::experiments::observe;
+use facelab::experiments::reach;
 use facelab::experiments::run;
 use facelab::experiments::transfer;
 use facelab::io::atomic::write_atomic;
@@ -244,10 +245,43 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The face's range of motion and validity.
+    Face {
+        #[command(subcommand)]
+        what: FaceCommand,
+    },
     /// Benchmarks (run with --release).
     Bench {
         #[command(subcommand)]
         what: Bench,
+    },
+}
+
+#[derive(Subcommand)]
+enum FaceCommand {
+    /// Per AU, how far its FACS muscles at full activation move their landmark (mm) against
+    /// the published band, and the muscle-group x AU matrix with its heat map.
+    Reach {
+        #[command(flatten)]
+        face: FaceArgs,
+        /// Range-of-motion table [default: experiments/au_reach.csv]
+        #[arg(long)]
+        table: Option<PathBuf>,
+        /// AU calibration table [default: experiments/au_calibration.csv]
+        #[arg(long)]
+        calibration: Option<PathBuf>,
+        /// Folder for au_reach.csv, muscle_au_matrix.csv and muscle_au_matrix.png
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Solve every muscle group and jaw input alone, every pair of them and the six
+    /// expressions at full activation; count non-converged, inverted, folded and crossed faces.
+    Sweep {
+        #[command(flatten)]
+        face: FaceArgs,
+        /// Folder for validity.csv
+        #[arg(long)]
+        out: PathBuf,
     },
 }
 
@@ -492,6 +526,72 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("wrote {}", p.display());
             }
         }
+        Command::Face { what } => match what {
+            FaceCommand::Reach {
+                face,
+                table,
+                calibration,
+                out,
+            } => {
+                let table = table.unwrap_or_else(facelab::io::reach::default_reach_path);
+                let (rows, written) =
+                    reach::write_reach(&face.source(), &table, calibration.as_deref(), &out)?;
+                println!("row\tdisplacement_mm\ttarget_mm\tobserved");
+                for r in &rows {
+                    let target = r
+                        .row
+                        .target()
+                        .map_or("-".to_string(), |(a, b)| format!("{a}-{b}"));
+                    let mark = if r.in_target() { "" } else { "  (outside)" };
+                    println!(
+                        "{}\t{:.2}\t{target}{}\t{:.2}{mark}",
+                        r.row.row,
+                        r.displacement_mm,
+                        if r.row.band.is_some() { "" } else { " chosen" },
+                        r.observed
+                    );
+                }
+                for path in written {
+                    eprintln!("wrote {}", path.display());
+                }
+            }
+            FaceCommand::Sweep { face, out } => {
+                let lines = reach::write_sweep(&face.source(), &out)?;
+                for kind in ["single", "pair", "expression"] {
+                    let of_kind: Vec<_> = lines.iter().filter(|l| l.kind == kind).collect();
+                    let converged = of_kind.iter().filter(|l| l.converged).count();
+                    let valid = of_kind.iter().filter(|l| l.is_valid()).count();
+                    println!(
+                        "{kind}: {} cases, {converged} converged, {valid} valid; iterations \
+                         median {}",
+                        of_kind.len(),
+                        {
+                            let mut it: Vec<usize> = of_kind.iter().map(|l| l.iterations).collect();
+                            it.sort_unstable();
+                            it.get(it.len() / 2).copied().unwrap_or(0)
+                        }
+                    );
+                }
+                for l in lines.iter().filter(|l| !l.is_valid()) {
+                    println!(
+                        "invalid: {} ({} inverted, {} folded, {} lip / {} lid crossings; lips \
+                         {} mm, lids {} mm) {}",
+                        l.case,
+                        l.inverted_prisms,
+                        l.folded_triangles,
+                        l.lip_crossings,
+                        l.lid_crossings,
+                        l.min_lip_gap_mm,
+                        l.min_lid_gap_mm,
+                        l.error
+                    );
+                }
+                eprintln!("wrote {}", out.join("validity.csv").display());
+                if lines.iter().any(|l| !l.is_valid()) {
+                    anyhow::bail!("some faces of the sweep are not valid (see above)");
+                }
+            }
+        },
         Command::Bench { what } => match what {
             Bench::Train {
                 pairs,

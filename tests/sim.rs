@@ -3,12 +3,11 @@
 use facelab::experiments::bench::random_samples;
 use facelab::io::expressions::{default_expressions_path, read_expressions};
 use facelab::sim::expression::Expression;
-use facelab::sim::geom::{cross, dot, norm, sub, V3};
+use facelab::sim::geom::{norm, sub, V3};
 use facelab::sim::solver::residual;
-use facelab::sim::tissue::{prism_volume, LIP_THICKNESS_SCALE};
+use facelab::sim::validity::defects;
 use facelab::sim::{
-    control_names, solve as solve_warm, solve_from_rest, Activations, FaceModel, SolveParams,
-    State, Workspace,
+    control_names, solve as solve_warm, solve_from_rest, Activations, SolveParams, State, Workspace,
 };
 
 use super::model;
@@ -31,35 +30,6 @@ fn with(pairs: &[(&str, f64)]) -> Activations {
 
 fn surface(s: &State) -> &[V3] {
     s.surface(model().vertex_count())
-}
-
-/// Prisms with non-positive volume, and surface triangles whose normal turned more than 90
-/// degrees from rest (a fold-over). Triangles touching the inner lip crease are left out: at
-/// the commissures the rest surface already folds ~150 degrees (see `Tissue::build`), and the
-/// lips rolling there turns those hidden triangles over without any visible fold.
-fn defects(m: &FaceModel, s: &State) -> (usize, usize) {
-    let inverted = m
-        .tissue
-        .prisms
-        .iter()
-        .filter(|p| prism_volume(&p.nodes.map(|i| s.positions[i])) <= 0.0)
-        .count();
-    let rest = m.rest_state();
-    let normal = |x: &[V3], t: &[usize; 3]| {
-        let [a, b, c] = t.map(|v| x[v]);
-        cross(sub(b, a), sub(c, a))
-    };
-    let folded = m
-        .surface
-        .triangles
-        .iter()
-        .filter(|t| {
-            t.iter()
-                .all(|&v| m.tissue.thickness_scale[v] >= LIP_THICKNESS_SCALE)
-        })
-        .filter(|t| dot(normal(&s.positions, t), normal(&rest.positions, t)) <= 0.0)
-        .count();
-    (inverted, folded)
 }
 
 #[test]
@@ -188,11 +158,9 @@ fn no_inverted_elements_for_any_single_muscle_or_expression() {
     for (name, a) in cases {
         match solve_from_rest(m, &a, &mut ws, &SolveParams::default()) {
             Ok((s, _)) => {
-                let (inverted, folded) = defects(m, &s);
-                if (inverted, folded) != (0, 0) {
-                    failures.push(format!(
-                        "{name}: {inverted} inverted prisms, {folded} folded triangles"
-                    ));
+                let d = defects(m, &s);
+                if !d.is_clean() {
+                    failures.push(format!("{name}: {d}"));
                 }
             }
             Err(e) => failures.push(format!("{name}: {e}")),

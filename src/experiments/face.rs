@@ -5,12 +5,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
+use crate::io::expressions::controls_activations;
 use crate::io::expressions::{default_expressions_path, read_expressions};
 use crate::io::mesh::{default_mesh_path, read_obj};
+use crate::io::reach::{default_reach_path, read_reach};
+use crate::report::compose::contact_sheet;
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::controls::{control_names, JAW_ROTATION};
 use crate::sim::expression::{Expression, ExpressionWeights};
+use crate::sim::validity::defects;
 use crate::sim::{
     solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, State, Workspace,
 };
@@ -146,6 +150,22 @@ pub fn pose(model: &FaceModel, a: &Activations, ws: &mut Workspace) -> Result<St
     Ok(state)
 }
 
+/// `pose`, refusing a face that folds, inverts an element or pushes the lips or lids through
+/// each other (`what` names the case in the error).
+pub fn valid_pose(
+    model: &FaceModel,
+    a: &Activations,
+    ws: &mut Workspace,
+    what: &str,
+) -> Result<State> {
+    let state = pose(model, a, ws)?;
+    let d = defects(model, &state);
+    if !d.is_clean() {
+        bail!("{what}: the solved face is not valid: {d}");
+    }
+    Ok(state)
+}
+
 /// `facelab render`.
 pub fn render_to(
     source: &FaceSource,
@@ -182,7 +202,12 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
     write(&rest, &frontal, out.join("rest.png"))?;
     write(&rest, &side, out.join("rest_three_quarter.png"))?;
     for e in Expression::ALL {
-        let state = pose(&model, &weights.activations(e, 1.0), &mut ws)?;
+        let state = valid_pose(
+            &model,
+            &weights.activations(e, 1.0),
+            &mut ws,
+            &e.to_string(),
+        )?;
         write(&state, &frontal, out.join(format!("{e}.png")))?;
         write(&state, &side, out.join(format!("{e}_three_quarter.png")))?;
         if e == Expression::Joy {
@@ -204,12 +229,43 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
         }
         let mut a = Activations::neutral();
         a.set_index(index, 1.0)?;
-        let state = pose(&model, &a, &mut ws)?;
+        let state = valid_pose(&model, &a, &mut ws, name)?;
         write(
             &state,
             &small,
             out.join("single").join(format!("{name}.png")),
         )?;
     }
+    // The contact sheet: rest, the six expressions at s = 1, each AU's FACS muscles at full
+    // activation (the rows of the range-of-motion table), labelled.
+    let mut sheet = vec![("rest".to_string(), render(&model, &rest, &small))];
+    for e in Expression::ALL {
+        let state = valid_pose(
+            &model,
+            &weights.activations(e, 1.0),
+            &mut ws,
+            &e.to_string(),
+        )?;
+        sheet.push((format!("{e} (s = 1)"), render(&model, &state, &small)));
+    }
+    for row in read_reach(&default_reach_path())? {
+        if row.row.contains('+') || row.row == "jaw_max" {
+            continue;
+        }
+        let a = controls_activations(&row.controls)
+            .map_err(|e| anyhow::anyhow!("reach row {}: {e}", row.row))?;
+        let state = valid_pose(&model, &a, &mut ws, &row.row)?;
+        sheet.push((format!("{} alone", row.row), render(&model, &state, &small)));
+    }
+    let sheet_path = out.join("contact_sheet.png");
+    save_png(
+        &contact_sheet(
+            "facelab: rest, the six expressions at s = 1, each AU's muscles at full activation",
+            &sheet,
+            6,
+        )?,
+        &sheet_path,
+    )?;
+    written.push(sheet_path);
     Ok(written)
 }

@@ -7,6 +7,7 @@ pub mod face;
 pub mod headpose;
 pub mod inversion;
 pub mod observe;
+pub mod reach;
 pub mod run;
 pub mod table1;
 pub mod table2;

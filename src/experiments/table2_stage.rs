@@ -35,7 +35,8 @@ use crate::stats;
 
 const COHORT_VERSION: u32 = 1;
 const TRANSFER_VERSION: u32 = 1;
-const RENDERS_VERSION: u32 = 2;
+// 3: renders show eyeballs, teeth, brows, lips and the head on a neck.
+const RENDERS_VERSION: u32 = 3;
 
 /// What Table 2 needs from the rest of the cell.
 pub struct Inputs<'a> {

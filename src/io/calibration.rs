@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use crate::observe::au::{au_index, Calibration, AU_COUNT, AU_NAMES};
 use crate::sim::Activations;
 
-use super::expressions::resolve_control;
+use super::expressions::{controls_activations, parse_controls};
 
 pub const DEFAULT_CALIBRATION: &str = "experiments/au_calibration.csv";
 
@@ -61,13 +61,7 @@ impl CalibrationTable {
 
     /// The activations an AU is calibrated on.
     pub fn activations(&self, au: usize) -> Result<Activations, String> {
-        let mut a = Activations::neutral();
-        for (name, value) in &self.rows[au].controls {
-            for index in resolve_control(name)? {
-                a.set_index(index, *value).map_err(|e| e.to_string())?;
-            }
-        }
-        Ok(a)
+        controls_activations(&self.rows[au].controls)
     }
 
     /// The file's text: comments, header, one row per AU (numbers with 6 significant digits).
@@ -162,18 +156,7 @@ pub fn parse_calibration(
             }
             Ok(v)
         };
-        let mut controls = Vec::new();
-        for item in cells[1].split(';').filter(|s| !s.trim().is_empty()) {
-            let (name, value) = item
-                .split_once('=')
-                .ok_or_else(|| err(line, format!("`{item}` is not name=value")))?;
-            let value: f64 = value
-                .trim()
-                .parse()
-                .map_err(|_| err(line, format!("`{value}` is not a number")))?;
-            resolve_control(name.trim()).map_err(|m| err(line, m))?;
-            controls.push((name.trim().to_string(), value));
-        }
+        let controls = parse_controls(cells[1]).map_err(|m| err(line, m))?;
         let row = CalibrationRow {
             controls,
             target: number(2)?,

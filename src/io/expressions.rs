@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use crate::sim::controls::{control_index, control_names, edit_distance, JAW_SLIDE, JAW_TWIST};
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::muscles::{Side, MUSCLE_PAIRS};
+use crate::sim::Activations;
 
 pub const DEFAULT_EXPRESSIONS: &str = "experiments/expressions.csv";
 
@@ -49,6 +50,35 @@ pub fn resolve_control(name: &str) -> Result<Vec<usize>, String> {
     Err(format!(
         "unknown control `{name}` (did you mean `{nearest}`?)"
     ))
+}
+
+/// Parses a `name=value;name=value` cell of a data file (names as `resolve_control` takes
+/// them), checking every name.
+pub fn parse_controls(cell: &str) -> Result<Vec<(String, f64)>, String> {
+    let mut controls = Vec::new();
+    for item in cell.split(';').filter(|s| !s.trim().is_empty()) {
+        let (name, value) = item
+            .split_once('=')
+            .ok_or_else(|| format!("`{item}` is not name=value"))?;
+        let value: f64 = value
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{}` is not a number", value.trim()))?;
+        resolve_control(name.trim())?;
+        controls.push((name.trim().to_string(), value));
+    }
+    Ok(controls)
+}
+
+/// The activations that parsed controls set (a muscle pair on both sides), from neutral.
+pub fn controls_activations(controls: &[(String, f64)]) -> Result<Activations, String> {
+    let mut a = Activations::neutral();
+    for (name, value) in controls {
+        for index in resolve_control(name)? {
+            a.set_index(index, *value).map_err(|e| e.to_string())?;
+        }
+    }
+    Ok(a)
 }
 
 /// Reads W_e for the six expressions.

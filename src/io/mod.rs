@@ -9,6 +9,7 @@ pub mod expressions;
 pub mod facs;
 pub mod mesh;
 pub mod openface;
+pub mod reach;
 
 use std::path::{Path, PathBuf};
 

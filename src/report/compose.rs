@@ -81,3 +81,42 @@ pub fn labelled_grid(
     }
     Ok(canvas)
 }
+
+/// A contact sheet: equally sized cells in rows of `columns`, each with its label printed
+/// under it, and a title.
+pub fn contact_sheet(
+    title: &str,
+    cells: &[(String, RgbImage)],
+    columns: usize,
+) -> Result<RgbImage> {
+    super::figures::register_font();
+    let (cw, ch) = cells
+        .first()
+        .map(|(_, c)| (c.width(), c.height()))
+        .unwrap_or((1, 1));
+    let columns = columns.max(1);
+    let rows = cells.len().div_ceil(columns) as u32;
+    let (top, caption) = (56u32, 30u32);
+    let (w, h) = (columns as u32 * cw, top + rows * (ch + caption));
+    let mut canvas = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
+    for (i, (_, cell)) in cells.iter().enumerate() {
+        let (c, r) = ((i % columns) as u32, (i / columns) as u32);
+        let (x, y) = (c * cw, top + r * (ch + caption));
+        image::imageops::replace(&mut canvas, cell, x as i64, y as i64);
+    }
+    {
+        let root = BitMapBackend::with_buffer(canvas.as_mut(), (w, h)).into_drawing_area();
+        let title_style = ("sans-serif", 26).into_font().color(&BLACK);
+        root.draw_text(title, &title_style, (12, 12))?;
+        let label = ("sans-serif", 19).into_font().color(&BLACK);
+        for (i, (text, _)) in cells.iter().enumerate() {
+            let (c, r) = ((i % columns) as u32, (i / columns) as u32);
+            let (tw, _) = root.estimate_text_size(text, &label)?;
+            let x = (c * cw + cw / 2) as i32 - tw as i32 / 2;
+            let y = (top + r * (ch + caption) + ch + 4) as i32;
+            root.draw_text(text, &label, (x, y))?;
+        }
+        root.present()?;
+    }
+    Ok(canvas)
+}

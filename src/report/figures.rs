@@ -369,3 +369,63 @@ pub fn line_panels(path: &Path, title: &str, panels: &[Panel]) -> Result<()> {
     }
     save(buffer, size, path)
 }
+
+/// A heat map of values in `[0, max]`: one row per `rows` label, one column per `columns`
+/// label, each cell coloured from white (0) to dark red (`max`) and printed to one decimal.
+pub fn heat_map(
+    path: &Path,
+    title: &str,
+    rows: &[String],
+    columns: &[String],
+    values: &[Vec<f64>],
+    max: f64,
+) -> Result<()> {
+    register_font();
+    let (cell_w, cell_h) = (54u32, 26u32);
+    let (left, top, right, bottom) = (330u32, 90u32, 30u32, 30u32);
+    let size = (
+        left + cell_w * columns.len() as u32 + right,
+        top + cell_h * rows.len() as u32 + bottom,
+    );
+    let mut buffer = vec![255u8; (size.0 * size.1 * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, size).into_drawing_area();
+        root.fill(&WHITE)?;
+        let text = |size: u32| TextStyle::from(("sans-serif", size).into_font()).color(&BLACK);
+        root.draw(&Text::new(title, (16, 14), text(24)))?;
+        for (j, c) in columns.iter().enumerate() {
+            let x = (left + cell_w * j as u32 + 8) as i32;
+            root.draw(&Text::new(c.clone(), (x, top as i32 - 26), text(16)))?;
+        }
+        for (i, (label, row)) in rows.iter().zip(values).enumerate() {
+            let y = (top + cell_h * i as u32) as i32;
+            root.draw(&Text::new(label.clone(), (12, y + 5), text(16)))?;
+            for (j, &v) in row.iter().enumerate() {
+                let x = (left + cell_w * j as u32) as i32;
+                let t = (v / max).clamp(0.0, 1.0);
+                // White -> orange -> dark red, readable in grey scale too.
+                let (r, g, b) = if t < 0.5 {
+                    let s = t / 0.5;
+                    (255.0, 255.0 - 105.0 * s, 255.0 - 215.0 * s)
+                } else {
+                    let s = (t - 0.5) / 0.5;
+                    (255.0 - 115.0 * s, 150.0 - 140.0 * s, 40.0 - 20.0 * s)
+                };
+                let fill = RGBColor(r as u8, g as u8, b as u8);
+                root.draw(&Rectangle::new(
+                    [(x, y), (x + cell_w as i32, y + cell_h as i32)],
+                    fill.filled(),
+                ))?;
+                root.draw(&Rectangle::new(
+                    [(x, y), (x + cell_w as i32, y + cell_h as i32)],
+                    RGBColor(200, 200, 200),
+                ))?;
+                let ink = if t > 0.6 { WHITE } else { BLACK };
+                let style = TextStyle::from(("sans-serif", 15).into_font()).color(&ink);
+                root.draw(&Text::new(format!("{v:.1}"), (x + 14, y + 5), style))?;
+            }
+        }
+        root.present()?;
+    }
+    save(buffer, size, path)
+}

@@ -3,6 +3,7 @@
 
 pub mod compose;
 pub mod figures;
+pub mod head;
 pub mod render;
 
 use std::path::Path;

@@ -4,10 +4,12 @@
 
 use image::{Rgb, RgbImage};
 
-use crate::sim::geom::{add, cross, dot, normalize, scale, sub, V3};
+use crate::sim::geom::{add, cross, dot, norm, normalize, scale, sub, V3};
 use crate::sim::model::{FaceModel, State};
 use crate::sim::muscles::MuscleKind;
 use crate::sim::tissue::SKULL;
+
+use super::head::{self, SKIN};
 
 /// Look-at perspective camera (metres, degrees).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -71,7 +73,8 @@ impl Default for RenderOptions {
     }
 }
 
-const SKIN: [f64; 3] = [0.86, 0.66, 0.56];
+const LIPS: [f64; 3] = [0.74, 0.38, 0.38];
+const BROW: [f64; 3] = [0.28, 0.19, 0.13];
 const EYE: [f64; 3] = [0.08, 0.07, 0.09];
 const MOUTH: [f64; 3] = [0.22, 0.04, 0.06];
 const BACKGROUND: [f64; 3] = [0.93, 0.93, 0.95];
@@ -124,7 +127,13 @@ struct Target {
 
 impl Target {
     /// Rasterises a triangle with per-vertex normals (None = flat colour, unlit).
-    fn triangle(&mut self, proj: &Projector, p: [V3; 3], n: Option<[V3; 3]>, base: [f64; 3]) {
+    fn triangle(
+        &mut self,
+        proj: &Projector,
+        p: [V3; 3],
+        n: Option<[V3; 3]>,
+        colours: [[f64; 3]; 3],
+    ) {
         let s = p.map(|q| proj.project(q));
         if s.iter().any(|q| q[2] <= 0.0) {
             return;
@@ -178,6 +187,9 @@ impl Target {
                     continue;
                 }
                 self.depth[i] = z;
+                let base: [f64; 3] = std::array::from_fn(|k| {
+                    w0 * colours[0][k] + w1 * colours[1][k] + w2 * colours[2][k]
+                });
                 self.color[i] = match n {
                     None => base,
                     Some(n) => {
@@ -242,17 +254,55 @@ fn activation_colour(a: f64) -> [f64; 3] {
     }
 }
 
-/// Vertex normals of the current surface.
-fn surface_normals(model: &FaceModel, surface: &[V3]) -> Vec<V3> {
-    let mut normals = vec![[0.0; 3]; surface.len()];
-    for t in &model.surface.triangles {
-        let [a, b, c] = t.map(|v| surface[v]);
-        let n = cross(sub(b, a), sub(c, a));
-        for &v in t {
-            normals[v] = add(normals[v], n);
+/// The red lips (MediaPipe's outer, semi-outer, semi-inner and inner lip rings) and the
+/// eyebrows (its upper and lower brow lines without their temple ends) as canonical-mesh vertex indices; a surface
+/// triangle with all three corners in a set takes its colour, so both move with the skin.
+const LIP_VERTICES: [usize; 80] = [
+    61, 185, 40, 39, 37, 0, 267, 269, 270, 409, 291, 146, 91, 181, 84, 17, 314, 405, 321, 375, 78,
+    191, 80, 81, 82, 13, 312, 311, 310, 415, 308, 95, 88, 178, 87, 14, 317, 402, 318, 324, 76, 184,
+    74, 73, 72, 11, 302, 303, 304, 408, 306, 77, 90, 180, 85, 16, 315, 404, 320, 307, 62, 183, 42,
+    41, 38, 12, 268, 271, 272, 407, 292, 96, 89, 179, 86, 15, 316, 403, 319, 325,
+];
+const BROW_VERTICES: [usize; 22] = [
+    70, 63, 105, 66, 107, 55, 193, 46, 53, 52, 65, 300, 293, 334, 296, 336, 285, 417, 276, 283,
+    282, 295,
+];
+
+/// Per surface triangle: skin, lip or brow colour. On a subdivided mesh (canonical vertices
+/// first, then one per split edge) a new vertex is in a set when the two canonical vertices
+/// nearest to it at rest, its edge's ends at the first level, both are.
+fn surface_marks(model: &FaceModel) -> Vec<[f64; 3]> {
+    const CANONICAL: usize = 468;
+    let rest = &model.surface.positions;
+    let mark = |set: &[usize]| -> Vec<bool> {
+        let mut inside = vec![false; rest.len()];
+        for &v in set {
+            inside[v] = true;
         }
-    }
-    normals.into_iter().map(normalize).collect()
+        for v in CANONICAL.min(rest.len())..rest.len() {
+            let mut near: Vec<(f64, usize)> = (0..CANONICAL)
+                .map(|u| (norm(sub(rest[u], rest[v])), u))
+                .collect();
+            near.select_nth_unstable_by(1, |a, b| a.0.total_cmp(&b.0));
+            inside[v] = inside[near[0].1] && inside[near[1].1];
+        }
+        inside
+    };
+    let (lip, brow) = (mark(&LIP_VERTICES), mark(&BROW_VERTICES));
+    model
+        .surface
+        .triangles
+        .iter()
+        .map(|t| {
+            if t.iter().all(|&v| lip[v]) {
+                LIPS
+            } else if t.iter().all(|&v| brow[v]) {
+                BROW
+            } else {
+                SKIN
+            }
+        })
+        .collect()
 }
 
 /// Renders `state` of `model`.
@@ -268,16 +318,28 @@ pub fn render(model: &FaceModel, state: &State, options: &RenderOptions) -> RgbI
     };
     let n = model.vertex_count();
     let surface = state.surface(n);
-    let normals = surface_normals(model, surface);
-    for t in &model.surface.triangles {
+    let normals = head::vertex_normals(surface, &model.surface.triangles);
+    let marks = surface_marks(model);
+    for (t, colour) in model.surface.triangles.iter().zip(&marks) {
         target.triangle(
             &proj,
             t.map(|v| surface[v]),
             Some(t.map(|v| normals[v])),
-            SKIN,
+            [*colour; 3],
         );
     }
-    // Openings: a dark fan just behind the opening's rim, so nothing behind the face shows.
+    for part in head::parts(model, state) {
+        for t in &part.triangles {
+            target.triangle(
+                &proj,
+                t.map(|v| part.positions[v]),
+                Some(t.map(|v| part.normals[v])),
+                t.map(|v| part.colours[v]),
+            );
+        }
+    }
+    // Openings: a dark fan just behind the opening's rim, so nothing behind the face shows
+    // (the eyeballs and teeth sit in front of it).
     let holes = [
         (&model.rig.mouth, MOUTH),
         (&model.rig.eyes[0].contour, EYE),
@@ -298,7 +360,7 @@ pub fn render(model: &FaceModel, state: &State, options: &RenderOptions) -> RgbI
                 &proj,
                 [centre, rim[k], rim[(k + 1) % rim.len()]],
                 None,
-                colour,
+                [colour; 3],
             );
         }
     }

@@ -14,6 +14,7 @@ pub mod neck;
 pub mod rig;
 pub mod solver;
 pub mod tissue;
+pub mod validity;
 
 pub use controls::{control_index, control_names, Activations, ControlError, CONTROL_COUNT};
 pub use mesh::{Mesh, MeshError};

@@ -156,7 +156,7 @@ pub fn mean(points: impl Iterator<Item = V3>) -> V3 {
 
 /// Splits a closed contour at its leftmost and rightmost vertices into its upper and lower
 /// paths (corners excluded) and returns (corner_min_x, corner_max_x, upper, lower).
-fn split_contour(contour: &[usize], p: &[V3]) -> (usize, usize, Vec<usize>, Vec<usize>) {
+pub fn split_contour(contour: &[usize], p: &[V3]) -> (usize, usize, Vec<usize>, Vec<usize>) {
     let by_x = |a: &&usize, b: &&usize| p[**a][0].total_cmp(&p[**b][0]).then(a.cmp(b));
     let c0 = *contour.iter().min_by(by_x).unwrap();
     let c1 = *contour.iter().max_by(by_x).unwrap();

@@ -1,0 +1,231 @@
+//! The range-of-motion table (`experiments/au_reach.csv`): per row (an OpenFace AU, or one of
+//! the combined actions `AU01+02` and `jaw_max`), the activations it is measured at, the AU(s)
+//! whose reading is reported, the skin landmark and how it is measured, the published band
+//! and facelab's own target where nothing is published. `facelab face reach` reads it and
+//! writes `au_reach.csv` and `muscle_au_matrix.csv` in the layouts below.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::observe::au::au_index;
+use crate::observe::LANDMARK_COUNT;
+
+use super::expressions::parse_controls;
+
+pub const DEFAULT_REACH: &str = "experiments/au_reach.csv";
+
+/// The default table path, resolved against the crate root when not found locally.
+pub fn default_reach_path() -> PathBuf {
+    super::data_path(DEFAULT_REACH)
+}
+
+const HEADER: [&str; 11] = [
+    "row",
+    "controls",
+    "observed_au",
+    "landmark",
+    "ibug",
+    "measure",
+    "band_min_mm",
+    "band_max_mm",
+    "chosen_min_mm",
+    "chosen_max_mm",
+    "why",
+];
+
+/// How a row's landmark motion is measured.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Measure {
+    /// Mean 3D displacement of the landmarks from rest.
+    Displacement(Vec<usize>),
+    /// Change of the distance between the means of two landmark groups.
+    Separation(Vec<usize>, Vec<usize>),
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReachRow {
+    pub row: String,
+    /// `name=value` as in the file (muscle pairs on both sides).
+    pub controls: Vec<(String, f64)>,
+    /// The AUs whose mean reading is reported.
+    pub observed: Vec<usize>,
+    pub landmark: String,
+    /// The `ibug` cell as written, for the output's landmark column.
+    pub ibug: String,
+    pub measure: Measure,
+    /// Published band (mm).
+    pub band: Option<(f64, f64)>,
+    /// facelab's target where no band is published (mm).
+    pub chosen: Option<(f64, f64)>,
+    pub why: String,
+}
+
+impl ReachRow {
+    /// The band a measurement is judged by: the published one, else facelab's choice.
+    pub fn target(&self) -> Option<(f64, f64)> {
+        self.band.or(self.chosen)
+    }
+
+    /// The `controls` cell as written.
+    pub fn controls_text(&self) -> String {
+        self.controls
+            .iter()
+            .map(|(n, v)| format!("{n}={v}"))
+            .collect::<Vec<_>>()
+            .join(";")
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ReachFileError {
+    #[error("{path}: {source}")]
+    Csv { path: PathBuf, source: csv::Error },
+    #[error("{path}:{line}: {message}")]
+    Row {
+        path: PathBuf,
+        line: u64,
+        message: String,
+    },
+    #[error("{path}: header must be `{}`, found `{found}`", HEADER.join(","))]
+    Header { path: PathBuf, found: String },
+}
+
+fn landmark_list(cell: &str) -> Result<Vec<usize>, String> {
+    let list: Vec<usize> = cell
+        .split(';')
+        .map(|s| {
+            s.trim()
+                .parse::<usize>()
+                .ok()
+                .filter(|&i| i < LANDMARK_COUNT)
+                .ok_or_else(|| format!("`{}` is not an iBUG landmark (0-67)", s.trim()))
+        })
+        .collect::<Result<_, _>>()?;
+    if list.is_empty() {
+        return Err("no landmark".to_string());
+    }
+    Ok(list)
+}
+
+fn band(lo: &str, hi: &str, what: &str) -> Result<Option<(f64, f64)>, String> {
+    match (lo.trim(), hi.trim()) {
+        ("", "") => Ok(None),
+        (a, b) => {
+            let parse = |s: &str| {
+                s.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v >= 0.0)
+                    .ok_or_else(|| format!("{what} `{s}` is not a number >= 0"))
+            };
+            let (a, b) = (parse(a)?, parse(b)?);
+            if a > b {
+                return Err(format!("{what} runs from {a} down to {b}"));
+            }
+            Ok(Some((a, b)))
+        }
+    }
+}
+
+/// Reads and checks the table.
+pub fn read_reach(path: &Path) -> Result<Vec<ReachRow>, ReachFileError> {
+    let csv_err = |source| ReachFileError::Csv {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .map_err(csv_err)?;
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(csv_err)?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    if header != HEADER {
+        return Err(ReachFileError::Header {
+            path: path.to_path_buf(),
+            found: header.join(","),
+        });
+    }
+    let mut rows = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(csv_err)?;
+        let line = record.position().map_or(0, |p| p.line());
+        let row_err = |message: String| ReachFileError::Row {
+            path: path.to_path_buf(),
+            line,
+            message,
+        };
+        let observed = record[2]
+            .split(';')
+            .map(|a| au_index(a).ok_or_else(|| format!("unknown AU `{}`", a.trim())))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(row_err)?;
+        let measure = match record[5].trim() {
+            "displacement" => Measure::Displacement(landmark_list(&record[4]).map_err(row_err)?),
+            "separation" => {
+                let (a, b) = record[4]
+                    .split_once('|')
+                    .ok_or_else(|| row_err("a separation needs `a|b` landmarks".to_string()))?;
+                Measure::Separation(
+                    landmark_list(a).map_err(row_err)?,
+                    landmark_list(b).map_err(row_err)?,
+                )
+            }
+            other => {
+                return Err(row_err(format!(
+                    "measure `{other}` is not `displacement` or `separation`"
+                )))
+            }
+        };
+        let band_published = band(&record[6], &record[7], "band").map_err(row_err)?;
+        let chosen = band(&record[8], &record[9], "chosen").map_err(row_err)?;
+        if band_published.is_some() == chosen.is_some() {
+            return Err(row_err(
+                "give either the published band or facelab's chosen one, not both or neither"
+                    .to_string(),
+            ));
+        }
+        if record[10].trim().is_empty() {
+            return Err(row_err("every row needs its reason (`why`)".to_string()));
+        }
+        rows.push(ReachRow {
+            row: record[0].trim().to_string(),
+            controls: parse_controls(&record[1]).map_err(row_err)?,
+            observed,
+            landmark: record[3].trim().to_string(),
+            ibug: record[4].trim().to_string(),
+            measure,
+            band: band_published,
+            chosen,
+            why: record[10].trim().to_string(),
+        });
+    }
+    Ok(rows)
+}
+
+/// One row of `au_reach.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ReachLine {
+    pub au: String,
+    pub controls: String,
+    pub landmark: String,
+    pub displacement_mm: String,
+    pub band_min_mm: String,
+    pub band_max_mm: String,
+    pub observed: String,
+}
+
+/// Writes rows as CSV text with a header from the row type's fields.
+pub fn csv_text<T: Serialize>(rows: &[T]) -> Result<String, csv::Error> {
+    let mut writer = csv::Writer::from_writer(Vec::new());
+    for row in rows {
+        writer.serialize(row)?;
+    }
+    let bytes = writer
+        .into_inner()
+        .map_err(|e| csv::Error::from(e.into_error()))?;
+    Ok(String::from_utf8(bytes).expect("CSV of UTF-8 strings"))
+}

@@ -1,0 +1,371 @@
+//! What the renderer draws beside the simulated skin, so a render reads as a head: eyeballs
+//! (sclera, iris, pupil) behind the lids, upper teeth fixed to the skull and lower teeth on the
+//! mandible, the cranium with hair, the ears and a neck. None of it is simulated; each part is
+//! built in the head frame from the rest face, then carried by the head's rigid motion (fitted
+//! to the skull sheet, so a head turned by the neck carries them) and, for the lower teeth, by
+//! the mandible's. The neck's lowest ring stays put and its top follows the head, so the head
+//! turns on a neck. Colours per vertex; the rasteriser shades them.
+
+use crate::observe::pose::align;
+use crate::sim::geom::{add, cross, lerp, norm, normalize, scale, sub, Rigid, Rot3, V3};
+use crate::sim::model::{FaceModel, State};
+use crate::sim::tissue::SKULL;
+
+/// A triangle soup with per-vertex normals and colours.
+#[derive(Clone, Debug, Default)]
+pub struct Part {
+    pub positions: Vec<V3>,
+    pub normals: Vec<V3>,
+    pub colours: Vec<[f64; 3]>,
+    pub triangles: Vec<[usize; 3]>,
+}
+
+impl Part {
+    fn moved(mut self, f: impl Fn(V3) -> V3, r: &Rot3) -> Part {
+        self.positions = self.positions.into_iter().map(f).collect();
+        self.normals = self.normals.into_iter().map(|n| r.apply(n)).collect();
+        self
+    }
+
+    /// A grid of `rows x cols` vertices from `point(u, v)` (u, v in [0, 1]), closed in u when
+    /// `wrap`; normals point along `outward(p)` or are computed from the grid.
+    fn grid(
+        rows: usize,
+        cols: usize,
+        wrap: bool,
+        point: impl Fn(f64, f64) -> V3,
+        colour: impl Fn(V3, f64, f64) -> [f64; 3],
+    ) -> Part {
+        let mut part = Part::default();
+        let cu = if wrap { cols } else { cols - 1 };
+        for i in 0..rows {
+            for j in 0..cols {
+                let (u, v) = (j as f64 / cu as f64, i as f64 / (rows - 1) as f64);
+                let p = point(u, v);
+                part.colours.push(colour(p, u, v));
+                part.positions.push(p);
+            }
+        }
+        let index = |i: usize, j: usize| i * cols + (j % cols);
+        let last = if wrap { cols } else { cols - 1 };
+        for i in 0..rows - 1 {
+            for j in 0..last {
+                let (a, b, c, d) = (
+                    index(i, j),
+                    index(i, j + 1),
+                    index(i + 1, j + 1),
+                    index(i + 1, j),
+                );
+                part.triangles.push([a, b, c]);
+                part.triangles.push([a, c, d]);
+            }
+        }
+        part.normals = vertex_normals(&part.positions, &part.triangles);
+        part
+    }
+}
+
+/// Area-weighted vertex normals.
+pub fn vertex_normals(positions: &[V3], triangles: &[[usize; 3]]) -> Vec<V3> {
+    let mut normals = vec![[0.0; 3]; positions.len()];
+    for t in triangles {
+        let [a, b, c] = t.map(|v| positions[v]);
+        let n = cross(sub(b, a), sub(c, a));
+        for &v in t {
+            normals[v] = add(normals[v], n);
+        }
+    }
+    normals.into_iter().map(normalize).collect()
+}
+
+const SCLERA: [f64; 3] = [0.94, 0.93, 0.90];
+const IRIS: [f64; 3] = [0.33, 0.22, 0.13];
+const IRIS_RIM: [f64; 3] = [0.17, 0.11, 0.07];
+const PUPIL: [f64; 3] = [0.03, 0.03, 0.03];
+const TOOTH: [f64; 3] = [0.88, 0.85, 0.76];
+const GUM: [f64; 3] = [0.72, 0.36, 0.38];
+pub const SKIN: [f64; 3] = [0.86, 0.66, 0.56];
+const EAR: [f64; 3] = [0.85, 0.62, 0.53];
+const HAIR: [f64; 3] = [0.22, 0.15, 0.11];
+
+/// The head's rigid motion from rest: the skull-sheet nodes away from the mandible, fitted.
+pub fn head_motion(model: &FaceModel, state: &State) -> (Rot3, V3) {
+    let n = model.vertex_count();
+    let idx: Vec<usize> = (0..n).filter(|&v| model.rig.jaw_weight[v] == 0.0).collect();
+    let rest: Vec<V3> = idx
+        .iter()
+        .map(|&v| model.tissue.rest[SKULL * n + v])
+        .collect();
+    let now: Vec<V3> = idx
+        .iter()
+        .map(|&v| state.positions[SKULL * n + v])
+        .collect();
+    align(&rest, &now)
+}
+
+/// A sphere's eye: white, with the iris and pupil around `+z` (looking ahead).
+fn eyeball(centre: V3, radius: f64) -> Part {
+    let iris = (5.9e-3 / radius).min(0.9).asin();
+    let pupil = (1.8e-3 / radius).min(0.5).asin();
+    Part::grid(
+        33,
+        48,
+        true,
+        |u, v| {
+            // v = 0 at the front pole (+z), 1 at the back.
+            let (theta, phi) = (v * std::f64::consts::PI, u * std::f64::consts::TAU);
+            add(
+                centre,
+                scale(
+                    [
+                        theta.sin() * phi.cos(),
+                        theta.sin() * phi.sin(),
+                        theta.cos(),
+                    ],
+                    radius,
+                ),
+            )
+        },
+        move |_, _, v| {
+            let theta = v * std::f64::consts::PI;
+            if theta < pupil {
+                PUPIL
+            } else if theta < 0.85 * iris {
+                IRIS
+            } else if theta < iris {
+                IRIS_RIM
+            } else {
+                SCLERA
+            }
+        },
+    )
+}
+
+/// A dental arch: teeth as panels along a parabola in x-z from `edge_y` (the biting edge)
+/// to `edge_y + height` (negative height goes down), gums beyond them.
+fn arch(front: V3, half_width: f64, depth: f64, edge_y: f64, height: f64) -> Part {
+    let teeth = 14usize;
+    let mut part = Part::default();
+    let at = |s: f64| -> V3 {
+        // s in [-1, 1] across the arch.
+        let x = s * half_width;
+        [front[0] + x, 0.0, front[2] - depth * s * s]
+    };
+    for k in 0..teeth {
+        // Narrow gaps between teeth; incisors at the middle.
+        let s0 = -1.0 + 2.0 * k as f64 / teeth as f64;
+        let s1 = -1.0 + 2.0 * (k + 1) as f64 / teeth as f64;
+        let gap = 0.06 * (s1 - s0);
+        let (a, b) = (at(s0 + gap), at(s1 - gap));
+        // Back teeth are shorter and further in.
+        let h = height * (1.0 - 0.35 * (0.5 * (s0 + s1)).abs());
+        let base = part.positions.len();
+        for (p, y) in [(a, edge_y), (b, edge_y), (b, edge_y + h), (a, edge_y + h)] {
+            part.positions.push([p[0], y, p[2]]);
+            part.colours.push(TOOTH);
+        }
+        part.triangles.push([base, base + 1, base + 2]);
+        part.triangles.push([base, base + 2, base + 3]);
+    }
+    // The gum band beyond the teeth, continuous.
+    let steps = 28usize;
+    let base = part.positions.len();
+    for k in 0..=steps {
+        let p = at(-1.0 + 2.0 * k as f64 / steps as f64);
+        let h = height * (1.0 - 0.35 * (-1.0 + 2.0 * k as f64 / steps as f64).abs());
+        for y in [edge_y + h, edge_y + h * 1.45] {
+            part.positions.push([p[0], y, p[2] - 1e-4]);
+            part.colours.push(GUM);
+        }
+    }
+    for k in 0..steps {
+        let (a, b, c, d) = (
+            base + 2 * k,
+            base + 2 * k + 2,
+            base + 2 * k + 3,
+            base + 2 * k + 1,
+        );
+        part.triangles.push([a, b, c]);
+        part.triangles.push([a, c, d]);
+    }
+    part.normals = part
+        .positions
+        .iter()
+        .map(|p| normalize([p[0] - front[0], 0.0, (p[2] - front[2] + depth).max(1e-4)]))
+        .collect();
+    part
+}
+
+/// An ellipsoid with a colour rule.
+fn ellipsoid(centre: V3, axes: V3, rows: usize, colour: impl Fn(V3) -> [f64; 3]) -> Part {
+    Part::grid(
+        rows,
+        2 * rows,
+        true,
+        |u, v| {
+            let (theta, phi) = (v * std::f64::consts::PI, u * std::f64::consts::TAU);
+            // Poles on y.
+            [
+                centre[0] + axes[0] * theta.sin() * phi.cos(),
+                centre[1] + axes[1] * theta.cos(),
+                centre[2] + axes[2] * theta.sin() * phi.sin(),
+            ]
+        },
+        move |p, _, _| colour(p),
+    )
+}
+
+/// Whether `p` lies inside the polygon `outline` seen along z.
+fn inside_outline(p: V3, outline: &[V3]) -> bool {
+    let mut inside = false;
+    let mut j = outline.len() - 1;
+    for i in 0..outline.len() {
+        let (a, b) = (outline[i], outline[j]);
+        if (a[1] > p[1]) != (b[1] > p[1])
+            && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0])
+        {
+            inside = !inside;
+        }
+        j = i;
+    }
+    inside
+}
+
+/// `part` with every vertex that lies within the face's outline (seen from the front) kept
+/// 4 mm behind the nearest face vertex, so the cranium never shows through the face.
+fn behind_face(mut part: Part, outline: &[V3], surface: &[V3]) -> Part {
+    for p in part.positions.iter_mut() {
+        if !inside_outline(*p, outline) {
+            continue;
+        }
+        let nearest = surface
+            .iter()
+            .min_by(|a, b| {
+                let d = |q: &&V3| (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+                d(a).total_cmp(&d(b))
+            })
+            .copied()
+            .unwrap_or(*p);
+        p[2] = p[2].min(nearest[2] - 4e-3);
+    }
+    part.normals = vertex_normals(&part.positions, &part.triangles);
+    part
+}
+
+/// Every part for `state`, moved with the head (and the mandible).
+pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
+    let n = model.vertex_count();
+    let rest = model.rest_state();
+    let surface = rest.surface(n);
+    let (r, t) = head_motion(model, state);
+    let head = |p: V3| add(r.apply(p), t);
+    let jaw: Rigid = model.pose(&state.activations).jaw;
+    let mut out = Vec::new();
+
+    for eye in &model.rig.eyes {
+        let radius = 0.95
+            * eye
+                .contour
+                .iter()
+                .map(|&v| norm(sub(surface[v], eye.centre)))
+                .fold(f64::INFINITY, f64::min);
+        out.push(eyeball(eye.centre, radius).moved(head, &r));
+    }
+
+    // Teeth from the rest mouth: the contour's corners and its upper/lower midpoints.
+    let mouth: Vec<V3> = model.rig.mouth.iter().map(|&v| surface[v]).collect();
+    let corner_x = mouth.iter().map(|p| p[0].abs()).fold(0.0, f64::max);
+    let front_z = mouth.iter().map(|p| p[2]).fold(f64::NEG_INFINITY, f64::max);
+    let corners_y = {
+        let mut by_x = mouth.clone();
+        by_x.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        0.5 * (by_x[0][1] + by_x[by_x.len() - 1][1])
+    };
+    let mid = mouth.iter().filter(|p| p[0].abs() < 0.15 * corner_x);
+    let (upper_y, lower_y) = mid.fold((f64::NEG_INFINITY, f64::INFINITY), |(u, l), p| {
+        (u.max(p[1]), l.min(p[1]))
+    });
+    let occlusal = lerp([0.0, upper_y, 0.0], [0.0, lower_y, 0.0], 0.5)[1].min(corners_y);
+    let front = [0.0, 0.0, front_z - 6e-3];
+    let upper = arch(front, 0.95 * corner_x, 0.022, occlusal + 5e-4, 9.5e-3);
+    out.push(upper.moved(head, &r));
+    let lower_front = [0.0, 0.0, front_z - 7.5e-3];
+    let lower = arch(lower_front, 0.9 * corner_x, 0.02, occlusal - 5e-4, -8.5e-3);
+    let lower = lower.moved(|p| jaw.apply(p), &jaw.rotation);
+    out.push(lower.moved(head, &r));
+
+    // Cranium and hair, fitted to the face's outline: as wide as the face, its front just
+    // behind the forehead's top edge, 19 cm from glabella to the back of the head.
+    let outline: Vec<V3> = model.rig.outer.iter().map(|&v| surface[v]).collect();
+    let half_width = outline.iter().map(|p| p[0].abs()).fold(0.0, f64::max);
+    let top = outline
+        .iter()
+        .copied()
+        .max_by(|a, b| a[1].total_cmp(&b[1]))
+        .unwrap_or([0.0; 3]);
+    let eyes_y = 0.5 * (model.rig.eyes[0].centre[1] + model.rig.eyes[1].centre[1]);
+    let centre = [0.0, eyes_y + 0.004, top[2] - 0.085];
+    let axes = [0.985 * half_width, 0.115, 0.095];
+    let hairline = top[1] - 0.004;
+    let cranium = ellipsoid(centre, axes, 72, move |p| {
+        // Hair over the top and the back, down to the nape; skin at the temples and face.
+        let back = (centre[2] - p[2]) / axes[2];
+        let line = hairline - 0.075 * back.clamp(0.0, 1.0) - 0.03 * (p[0].abs() / axes[0]).powi(4);
+        // A soft hairline, 6 mm wide, so the coarse grid shows no steps.
+        let t = ((p[1] - line) / 0.006 + 0.5).clamp(0.0, 1.0);
+        let t = t * t * (3.0 - 2.0 * t);
+        std::array::from_fn(|k| SKIN[k] + t * (HAIR[k] - SKIN[k]))
+    });
+    let cranium = behind_face(cranium, &outline, surface);
+    out.push(cranium.moved(head, &r));
+    // The lower head behind the jaw, between the face's lower edge and the neck.
+    let lower_head = ellipsoid(
+        [0.0, eyes_y - 0.06, centre[2] + 0.012],
+        [0.8 * half_width, 0.06, 0.075],
+        32,
+        |_| SKIN,
+    );
+    out.push(behind_face(lower_head, &outline, surface).moved(head, &r));
+
+    // Ears: flat ellipsoids beside the head, from brow to nose-base height.
+    for side in [-1.0, 1.0] {
+        let c = [
+            side * (half_width + 0.002),
+            eyes_y - 0.006,
+            centre[2] + 0.035,
+        ];
+        let ear = ellipsoid(c, [0.007, 0.031, 0.016], 16, |_| EAR);
+        out.push(ear.moved(head, &r));
+    }
+
+    // Neck: rings from inside the head down, the top ring with the head, the bottom fixed.
+    let neck_top = eyes_y - 0.05;
+    let neck_bottom = eyes_y - 0.30;
+    let neck_centre_z = centre[2] + 0.005;
+    let neck = Part::grid(
+        24,
+        40,
+        true,
+        |u, v| {
+            let phi = u * std::f64::consts::TAU;
+            let y = neck_top + v * (neck_bottom - neck_top);
+            [0.06 * phi.cos(), y, neck_centre_z + 0.062 * phi.sin()]
+        },
+        |_, _, _| SKIN,
+    );
+    let neck = Part {
+        positions: neck
+            .positions
+            .iter()
+            .map(|&p| {
+                let w = ((p[1] - neck_bottom) / (neck_top - neck_bottom)).clamp(0.0, 1.0);
+                let w = w * w * (3.0 - 2.0 * w);
+                lerp(p, head(p), w)
+            })
+            .collect(),
+        ..neck
+    };
+    let normals = vertex_normals(&neck.positions, &neck.triangles);
+    out.push(Part { normals, ..neck });
+    out
+}
