@@ -7,6 +7,7 @@ mod harness;
 mod neck;
 mod observe;
 mod openface;
+mod reach;
 mod sim;
 mod transfer;
 

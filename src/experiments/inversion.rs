@@ -489,7 +489,8 @@ pub struct Output {
     pub markdown: String,
 }
 
-const INVERSION_VERSION: u32 = 2;
+// 3: the expressive face (see BASIS_VERSION in run.rs).
+const INVERSION_VERSION: u32 = 3;
 
 /// The cached inversion stage. Its key hashes `inversion.*` and the keys of the cohort, the
 /// first seed's unified network, the dataset (normalization range) and the basis.

@@ -21,7 +21,7 @@
 //! | AU09 nose wrinkler | rise of the nostril wings (31, 35) |
 //! | AU10 upper lip raiser | rise of the upper lip (50, 51, 52) |
 //! | AU12 lip corner puller | rise of the mouth corners (48, 54) plus half their outward pull |
-//! | AU14 dimpler | backward pull of the mouth corners relative to the lips beside them (upper 49, 53 and lower 55, 59, averaged), less half their vertical motion: corners pulled down or up, or by the opening jaw, slide back over the curved face without a dimple |
+//! | AU14 dimpler | backward pull of the mouth corners relative to the lips beside them (upper 49, 53 and lower 55, 59, averaged), but never more than the corners' own backward motion, less half their vertical motion: corners pulled down or up, or by the opening jaw, slide back over the curved face without a dimple, and lips pushed forward (mentalis, levator labii at full human range in disgust) leave corners that stay put without one |
 //! | AU15 lip corner depressor | fall of the corners below the mid-line of the lips (62, 66) |
 //! | AU17 chin raiser | lengthening of lower lip to chin (57-8): mentalis pushes the lower lip up off the chin |
 //! | AU20 lip stretcher | outward pull of the corners beyond their rise |
@@ -310,7 +310,8 @@ fn measures(
         dy(&[31, 35]),
         dy(&[50, 51, 52]),
         pos(corner_rise) + 0.5 * pos(corner_out),
-        back(&CORNERS) - 0.5 * (back(&[49, 53]) + back(&[55, 59])) - 0.5 * corner_rise.abs(),
+        back(&CORNERS).min(back(&CORNERS) - 0.5 * (back(&[49, 53]) + back(&[55, 59])))
+            - 0.5 * corner_rise.abs(),
         -(corner_rise - mid),
         dist(c, 57, 8) - dist(n, 57, 8),
         corner_out - pos(corner_rise),

@@ -231,22 +231,43 @@ fn inside_outline(p: V3, outline: &[V3]) -> bool {
     inside
 }
 
+/// The surface vertex nearest to `p` seen from the front (in x and y).
+fn nearest_vertex(p: V3, surface: &[V3]) -> usize {
+    let d = |q: V3| (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+    (0..surface.len())
+        .min_by(|&a, &b| d(surface[a]).total_cmp(&d(surface[b])).then(a.cmp(&b)))
+        .unwrap_or(0)
+}
+
+/// Distance from `p` to the polygon `outline` seen along z.
+fn outline_distance(p: V3, outline: &[V3]) -> f64 {
+    let mut best = f64::INFINITY;
+    for i in 0..outline.len() {
+        let (a, b) = (outline[i], outline[(i + 1) % outline.len()]);
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = (dx * dx + dy * dy).max(1e-18);
+        let t = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0);
+        best = best.min((p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy));
+    }
+    best
+}
+
 /// `part` with every vertex that lies within the face's outline (seen from the front) kept
-/// 4 mm behind the nearest face vertex, so the cranium never shows through the face.
+/// behind the nearest face vertex: 4 mm near the outline, where the part meets the face's
+/// edge, and 4 cm deeper than 1 cm inside it, behind the eyeballs and teeth. So the cranium
+/// never shows through the face.
 fn behind_face(mut part: Part, outline: &[V3], surface: &[V3]) -> Part {
     for p in part.positions.iter_mut() {
         if !inside_outline(*p, outline) {
             continue;
         }
-        let nearest = surface
-            .iter()
-            .min_by(|a, b| {
-                let d = |q: &&V3| (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
-                d(a).total_cmp(&d(b))
-            })
-            .copied()
-            .unwrap_or(*p);
-        p[2] = p[2].min(nearest[2] - 4e-3);
+        let nearest = surface[nearest_vertex(*p, surface)];
+        let depth = if outline_distance(*p, outline) > 0.01 {
+            0.04
+        } else {
+            4e-3
+        };
+        p[2] = p[2].min(nearest[2] - depth);
     }
     part.normals = vertex_normals(&part.positions, &part.triangles);
     part
@@ -325,7 +346,29 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         32,
         |_| SKIN,
     );
-    out.push(behind_face(lower_head, &outline, surface).moved(head, &r));
+    // It follows the mandible as the face does: each vertex by the jaw weight of the face
+    // vertex nearest to it seen from the front.
+    let lower_head = behind_face(lower_head, &outline, surface);
+    let positions = lower_head
+        .positions
+        .iter()
+        .map(|&p| {
+            let w = model.rig.jaw_weight[nearest_vertex(p, surface)];
+            lerp(p, jaw.apply(p), w)
+        })
+        .collect();
+    let lower_head = Part {
+        positions,
+        ..lower_head
+    };
+    let normals = vertex_normals(&lower_head.positions, &lower_head.triangles);
+    out.push(
+        Part {
+            normals,
+            ..lower_head
+        }
+        .moved(head, &r),
+    );
 
     // Ears: flat ellipsoids beside the head, from brow to nose-base height.
     for side in [-1.0, 1.0] {

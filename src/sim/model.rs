@@ -5,6 +5,7 @@
 
 use super::controls::{muscle_index, Activations, JAW_ROTATION, JAW_SLIDE, JAW_TWIST};
 use super::geom::{norm, sub, Rigid, V3};
+use super::lips::LipMargins;
 use super::mesh::{Mesh, MeshError};
 use super::muscles::{attach, Bone, LidAction, Muscle, MuscleKind, Side, MUSCLE_PAIRS};
 use super::rig::{JawParams, LidParams, Rig, RigError};
@@ -51,6 +52,9 @@ pub struct FaceModel {
     /// Per node: solved for (true) or set by the rig (false).
     pub free: Vec<bool>,
     pub contacts: Vec<Contact>,
+    /// The lips' inner margins, kept from passing through each other by the solver's lip
+    /// contact term (`sim::lips`).
+    pub lips: LipMargins,
     /// Per surface vertex: its mirror image across x = 0.
     pub mirror: Vec<usize>,
     /// Width of the face (max x - min x of the surface), the scale for tolerances (m).
@@ -93,7 +97,7 @@ impl FaceModel {
         if params.subdivisions > 2 {
             return Err(ModelError::Subdivisions(params.subdivisions));
         }
-        let mut surface = base.clone();
+        let mut surface = super::rig::open_eyes(base, &params.lids)?;
         for _ in 0..params.subdivisions {
             surface = surface.loop_subdivide();
         }
@@ -149,6 +153,7 @@ impl FaceModel {
                 clearance: params.tissue.skull_clearance_fraction * tissue.muscle_layer_depth(v),
             })
             .collect();
+        let lips = LipMargins::new(&rig.mouth, &surface.positions);
         let xs = surface.positions.iter().map(|p| p[0]);
         let face_width =
             xs.clone().fold(f64::NEG_INFINITY, f64::max) - xs.fold(f64::INFINITY, f64::min);
@@ -160,6 +165,7 @@ impl FaceModel {
             muscles,
             free,
             contacts,
+            lips,
             mirror,
             face_width,
         })

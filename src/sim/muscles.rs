@@ -88,9 +88,10 @@ pub struct MusclePair {
     pub name: &'static str,
     /// The OpenFace AU (number) the muscle mainly drives (shared/facs-facts.md (b)).
     pub au: u8,
-    /// Peak force at activation 1 (N), spread over the insertion zone. Set so that each muscle
-    /// alone at full activation moves its landmark by several millimetres, as faces do; unused
-    /// for lid muscles, whose effect is an angle.
+    /// Peak force at activation 1 (N), spread over the insertion zone. Set so that each AU's
+    /// muscles at full activation move its landmark by the published maximal-effort distance
+    /// of adult faces (`experiments/au_reach.csv`, `facelab face reach`); unused for lid
+    /// muscles, whose effect is an angle.
     pub max_force: f64,
     pub action: Action,
 }
@@ -165,7 +166,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "frontalis_medial",
         1,
-        11.2,
+        17.9,
         109,
         [0.0, 0.025, -0.01],
         Bone::Skull,
@@ -175,7 +176,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "frontalis_intermediate",
         2,
-        10.0,
+        45.0,
         67,
         [0.0, 0.025, -0.01],
         Bone::Skull,
@@ -185,7 +186,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "frontalis_lateral",
         2,
-        11.2,
+        56.0,
         103,
         [0.0, 0.025, -0.01],
         Bone::Skull,
@@ -196,7 +197,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "corrugator_supercilii",
         4,
-        6.8,
+        23.8,
         193,
         NONE,
         Bone::Skull,
@@ -206,7 +207,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "depressor_supercilii",
         4,
-        2.5,
+        8.75,
         122,
         NONE,
         Bone::Skull,
@@ -216,7 +217,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "procerus",
         4,
-        2.0,
+        7.0,
         6,
         [-0.003, 0.0, 0.0],
         Bone::Skull,
@@ -227,7 +228,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     sphincter(
         "orbicularis_oculi_orbital",
         6,
-        18.0,
+        27.0,
         Opening::Eye,
         Arc::Whole,
         [2.8, 2.4],
@@ -241,18 +242,18 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "levator_labii_superioris_alaeque_nasi",
         9,
-        3.0,
+        19.5,
         188,
         NONE,
         Bone::Skull,
         129,
         0.9,
     ),
-    linear("nasalis", 9, 1.5, 203, NONE, Bone::Skull, 126, 0.7),
+    linear("nasalis", 9, 9.75, 203, NONE, Bone::Skull, 126, 0.7),
     linear(
         "levator_labii_superioris",
         10,
-        5.2,
+        39.0,
         100,
         NONE,
         Bone::Skull,
@@ -262,7 +263,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "zygomaticus_minor",
         10,
-        3.0,
+        15.0,
         118,
         NONE,
         Bone::Skull,
@@ -273,7 +274,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "zygomaticus_major",
         12,
-        12.0,
+        21.6,
         123,
         NONE,
         Bone::Skull,
@@ -283,19 +284,19 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "levator_anguli_oris",
         12,
-        4.5,
+        8.1,
         36,
         NONE,
         Bone::Skull,
         61,
         0.9,
     ),
-    linear("buccinator", 14, 6.0, 215, NONE, Bone::Skull, 61, 0.9),
-    linear("risorius", 20, 8.0, 58, NONE, Bone::Skull, 61, 0.9),
+    linear("buccinator", 14, 18.0, 215, NONE, Bone::Skull, 61, 0.9),
+    linear("risorius", 20, 12.0, 58, NONE, Bone::Skull, 61, 0.9),
     linear(
         "platysma",
         20,
-        4.0,
+        6.0,
         136,
         [0.0, -0.03, -0.01],
         Bone::Skull,
@@ -305,7 +306,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "depressor_anguli_oris",
         15,
-        5.9,
+        11.8,
         150,
         NONE,
         Bone::Mandible,
@@ -316,7 +317,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "depressor_labii_inferioris",
         25,
-        3.5,
+        10.5,
         32,
         NONE,
         Bone::Mandible,
@@ -326,7 +327,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "mentalis",
         17,
-        4.0,
+        14.0,
         18,
         [-0.004, 0.0, 0.0],
         Bone::Mandible,
@@ -336,7 +337,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "incisivus_labii_superioris",
         23,
-        2.0,
+        6.0,
         165,
         NONE,
         Bone::Skull,
@@ -346,7 +347,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     linear(
         "incisivus_labii_inferioris",
         23,
-        2.0,
+        6.0,
         194,
         NONE,
         Bone::Mandible,
@@ -356,7 +357,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     sphincter(
         "orbicularis_oris_upper",
         23,
-        4.5,
+        20.7,
         Opening::Mouth,
         Arc::Upper,
         [3.0, 1.6],
@@ -366,7 +367,7 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
     sphincter(
         "orbicularis_oris_lower",
         23,
-        4.5,
+        20.7,
         Opening::Mouth,
         Arc::Lower,
         [3.0, 1.6],

@@ -7,7 +7,7 @@
 //! tarsal plates, stiff plates that slide over the globe; they rotate rigidly about an axis
 //! through the eyeball centre, driven by the lid muscles. Depends on `geom`, `mesh`.
 
-use super::geom::{add, lerp, normalize, scale, sub, Rigid, Rot3, V3};
+use super::geom::{add, lerp, norm, normalize, scale, sub, Rigid, Rot3, V3};
 use super::mesh::Mesh;
 
 /// Mandible kinematics. Defaults from adult anatomy: the condyles sit ~1 cm in front of the
@@ -18,7 +18,9 @@ use super::mesh::Mesh;
 pub struct JawParams {
     /// A point on the temporomandibular axis (m); the axis runs along x through it.
     pub pivot: V3,
-    /// Opening angle at `jaw_rotation = 1` (rad). Default 16 degrees.
+    /// Opening angle at `jaw_rotation = 1` (rad). Default 24 degrees: the maximal opening,
+    /// which moves the lower lip's midpoint 40 mm (42-46 mm in forceful depression, a PUMCH
+    /// motion-capture thesis in shared/facs-magnitudes.md; interincisal 44-57 mm).
     pub max_rotation: f64,
     /// Forward (+z) translation at `jaw_slide = 1`, backward at 0 (m). Default 4 mm.
     pub slide_range: f64,
@@ -34,7 +36,7 @@ impl Default for JawParams {
     fn default() -> Self {
         JawParams {
             pivot: [0.0, 0.003, -0.026],
-            max_rotation: 16f64.to_radians(),
+            max_rotation: 24f64.to_radians(),
             slide_range: 0.004,
             twist_range: 6f64.to_radians(),
             blend_width: 0.01,
@@ -56,11 +58,14 @@ impl JawParams {
 }
 
 /// How far each lid muscle turns the margins, as fractions of the angle that would bring the
-/// upper and lower margins together. Set by eye from the model's renders so that the
-/// pretarsal part alone closes the eye (a blink), the preseptal part narrows it to about half
-/// (lid tightener), and the levator raises the upper lid by about 2 mm. The orbital part of
+/// upper and lower margins together. The pretarsal part alone closes the eye until the lids
+/// meet (a blink: the upper lid travels 8.2 mm, inside the 8-12 mm of a full closure), the
+/// preseptal part narrows it by about a third (lid tightener, lower lid up 3.3 mm), and the
+/// levator raises the upper lid by 3.5 mm (a few mm above primary gaze). The orbital part of
 /// orbicularis oculi raises the cheek, which pushes the lower lid up (FACS AU6: the
-/// infraorbital triangle and lower lid rise): `cheek_lower` per unit of its activation.
+/// infraorbital triangle and lower lid rise): `cheek_lower` per unit of its activation, set
+/// so the lower lid rises 5 mm (2.5-6 mm published for a grin). Distances from
+/// `facelab face reach`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LidParams {
     /// Depth of the eyeball centre behind the line joining the eye corners (m). Default 12 mm
@@ -72,8 +77,16 @@ pub struct LidParams {
     pub tighten_lower: f64,
     pub raise_upper: f64,
     pub cheek_lower: f64,
-    /// Largest closed fraction; the margins stop just short of touching.
+    /// Largest closed fraction; at 1 the margins meet.
     pub max_closure: f64,
+    /// Palpebral aperture the rest face is opened to where the mesh's is narrower (m).
+    /// Default 10.5 mm, within adults' 9.7 +/- 1.2 mm in primary gaze (Read et al. 2006); the
+    /// canonical face has 6.2 mm, too narrow for the upper lid to travel the 8-12 mm of a
+    /// full closure. Toward the wide end so it does with the lower lid taking 15%.
+    pub rest_aperture: f64,
+    /// How far from the eyeball centre the opening of the upper lid reaches (m). Default
+    /// 22 mm, below the brow.
+    pub upper_lid_reach: f64,
 }
 
 impl Default for LidParams {
@@ -81,12 +94,14 @@ impl Default for LidParams {
         LidParams {
             eyeball_depth: 0.012,
             close_upper: 0.85,
-            close_lower: 0.12,
+            close_lower: 0.15,
             tighten_upper: 0.15,
             tighten_lower: 0.35,
             raise_upper: 0.35,
-            cheek_lower: 0.3,
-            max_closure: 0.97,
+            cheek_lower: 0.35,
+            max_closure: 1.0,
+            rest_aperture: 10.5e-3,
+            upper_lid_reach: 0.022,
         }
     }
 }
@@ -141,6 +156,8 @@ pub struct Rig {
 pub enum RigError {
     #[error("the face mesh has {0} boundary loops; expected 4 (outline, mouth, two eyes)")]
     LoopCount(usize),
+    #[error("the face mesh is not mirror-symmetric, so its eyes cannot be opened alike")]
+    Asymmetric,
 }
 
 /// Mean of a set of points.
@@ -205,6 +222,83 @@ fn at_x(path: &[usize], corners: (usize, usize), x: f64, p: &[V3]) -> V3 {
 fn elevation(q: V3, c: V3) -> f64 {
     let d = sub(q, c);
     d[1].atan2(d[2])
+}
+
+/// Laplace smoothing of `weight` on the mesh graph, holding the `fixed` vertices (500 Jacobi
+/// sweeps, enough for the face mesh's graph diameter at every subdivision level used).
+fn harmonic(mesh: &Mesh, mut weight: Vec<f64>, fixed: &[bool]) -> Vec<f64> {
+    let neighbours = mesh.neighbours();
+    for _ in 0..500 {
+        let next: Vec<f64> = (0..weight.len())
+            .map(|v| {
+                if fixed[v] || neighbours[v].is_empty() {
+                    weight[v]
+                } else {
+                    neighbours[v].iter().map(|&u| weight[u]).sum::<f64>()
+                        / neighbours[v].len() as f64
+                }
+            })
+            .collect();
+        weight = next;
+    }
+    weight
+}
+
+/// Rest aperture of an eye: the vertical gap between its upper and lower margins at the
+/// middle of the eye (m).
+pub fn eye_aperture(contour: &[usize], p: &[V3]) -> f64 {
+    let (c0, c1, upper, lower) = split_contour(contour, p);
+    let x = 0.5 * (p[c0][0] + p[c1][0]);
+    at_x(&upper, (c0, c1), x, p)[1] - at_x(&lower, (c0, c1), x, p)[1]
+}
+
+/// Opens the eyes of a rest surface to `lids.rest_aperture` where they are narrower: the
+/// upper lid turns up about the eye axis (as the tarsal plate does), by the angle that
+/// lifts the margin's middle to the target, blended harmonically to nothing at the lower
+/// margin, the corners and `lids.upper_lid_reach` from the eye centre. The subject's left
+/// eye gets the mirror image of the right one's change, so the face stays symmetric.
+pub fn open_eyes(mesh: &Mesh, lids: &LidParams) -> Result<Mesh, RigError> {
+    let rig = Rig::build(mesh, JawParams::default(), *lids)?;
+    let mirror = mesh.mirror_map().map_err(|_| RigError::Asymmetric)?;
+    let p = &mesh.positions;
+    let eye = &rig.eyes[0];
+    let aperture = eye_aperture(&eye.contour, p);
+    let mut out = mesh.clone();
+    if aperture >= lids.rest_aperture {
+        return Ok(out);
+    }
+    let (c0, c1, upper, lower) = split_contour(&eye.contour, p);
+    let mid = at_x(&upper, (c0, c1), 0.5 * (p[c0][0] + p[c1][0]), p);
+    let radius = (mid[1] - eye.centre[1]).hypot(mid[2] - eye.centre[2]);
+    let angle = (lids.rest_aperture - aperture) / radius;
+    let n = mesh.vertex_count();
+    let mut weight = vec![0.0; n];
+    let mut fixed = vec![false; n];
+    for v in 0..n {
+        if norm(sub(p[v], eye.centre)) > lids.upper_lid_reach || p[v][0] > 0.0 {
+            fixed[v] = true;
+        }
+    }
+    for &v in &upper {
+        weight[v] = 1.0;
+        fixed[v] = true;
+    }
+    for &v in lower.iter().chain([&c0, &c1]) {
+        fixed[v] = true;
+    }
+    let weight = harmonic(mesh, weight, &fixed);
+    for v in 0..n {
+        // Only the upper lid moves: vertices below the eye's corner line keep their place.
+        if weight[v] <= 0.0 || p[v][1] < 0.5 * (p[c0][1] + p[c1][1]) {
+            continue;
+        }
+        let r = sub(p[v], eye.centre);
+        let turned = Rot3::about_axis([1.0, 0.0, 0.0], -angle * weight[v]).apply(r);
+        let q = add(eye.centre, turned);
+        out.positions[v] = q;
+        out.positions[mirror[v]] = [-q[0], q[1], q[2]];
+    }
+    Ok(out)
 }
 
 impl Rig {
@@ -311,21 +405,7 @@ impl Rig {
             weight[v] = 1.0;
             fixed[v] = true;
         }
-        let neighbours = mesh.neighbours();
-        for _ in 0..500 {
-            let next: Vec<f64> = (0..n)
-                .map(|v| {
-                    if fixed[v] || neighbours[v].is_empty() {
-                        weight[v]
-                    } else {
-                        neighbours[v].iter().map(|&u| weight[u]).sum::<f64>()
-                            / neighbours[v].len() as f64
-                    }
-                })
-                .collect();
-            weight = next;
-        }
-        weight
+        harmonic(mesh, weight, &fixed)
     }
 
     /// Lid rotation angles (upper, lower) as fractions of the closing angle for the three lid

@@ -70,6 +70,12 @@ pub struct TissueParams {
     /// muscle-layer vertical spring (91 N/m at subdivision 0), so penetration stays a small
     /// fraction of the layer.
     pub skull_contact_stiffness: f64,
+    /// Stiffness of the contact between the lips (N/m per pair of facing inner-lip nodes,
+    /// acting when the upper one sinks below the lower). Default 20000 N/m: the corner
+    /// pullers together (zygomaticus major with risorius, ~40 N) otherwise push the lips
+    /// 1-3 mm through each other near the corners; at this stiffness the overlap stays
+    /// below the 0.5 mm `sim::validity` allows.
+    pub lip_contact_stiffness: f64,
     /// Closest approach of the fascia to the skull, as a fraction of the muscle layer
     /// thickness. Default 0.25.
     pub skull_clearance_fraction: f64,
@@ -93,6 +99,7 @@ impl Default for TissueParams {
             shear_modulus_fraction: 1.0,
             volume_modulus: 50e3,
             skull_contact_stiffness: 5000.0,
+            lip_contact_stiffness: 20000.0,
             skull_clearance_fraction: 0.25,
             normal_smoothing_passes: 8,
         }
