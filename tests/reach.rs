@@ -148,3 +148,48 @@ fn a_bad_reach_table_is_named_with_its_line() {
     assert!(!dir.join("au_reach.csv").exists(), "nothing half-written");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_gallery_refuses_a_face_whose_lips_pass_through_each_other() {
+    use facelab::experiments::face::valid_pose;
+    use facelab::sim::{Activations, FaceModel, Workspace};
+    // Without the lip contact, zygomaticus major with the lower half of orbicularis oris
+    // pushes the lower lip 2 mm through the upper one near the corners.
+    let mesh = facelab::io::mesh::read_obj(&facelab::io::mesh::default_mesh_path()).unwrap();
+    let mut params = facelab::sim::FaceParams::default();
+    params.tissue.lip_contact_stiffness = 0.0;
+    let open = FaceModel::new(&mesh, params).unwrap();
+    let mut a = Activations::neutral();
+    for name in [
+        "zygomaticus_major_left",
+        "zygomaticus_major_right",
+        "orbicularis_oris_lower_left",
+        "orbicularis_oris_lower_right",
+    ] {
+        a.set(name, 1.0).unwrap();
+    }
+    let mut ws = Workspace::new(&open);
+    let err = valid_pose(&open, &a, &mut ws, "the test face").unwrap_err();
+    let text = format!("{err:#}");
+    assert!(
+        text.contains("the test face") && text.contains("lip"),
+        "{text}"
+    );
+    // With the contact (the default model) the same face is valid.
+    let m = model();
+    let mut ws = Workspace::new(m);
+    valid_pose(m, &a, &mut ws, "the test face").unwrap();
+}
+
+#[test]
+fn gallery_writes_the_contact_sheet() {
+    let dir = temp("reach", "gallery");
+    let (ok, _, stderr) = run(&["gallery", "--out", dir.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    // Rest, six expressions and the 17 AUs, six to a row of 240 x 280 renders.
+    let sheet = image::open(dir.join("contact_sheet.png")).unwrap();
+    assert_eq!(sheet.width(), 6 * 240);
+    assert_eq!(sheet.height(), 56 + 4 * (280 + 30));
+    assert!(dir.join("single").join("jaw_rotation.png").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -198,9 +198,17 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
         camera: Camera::three_quarter(),
         ..frontal
     };
+    let small = RenderOptions {
+        width: 240,
+        height: 280,
+        ..frontal
+    };
     let rest = model.rest_state();
     write(&rest, &frontal, out.join("rest.png"))?;
     write(&rest, &side, out.join("rest_three_quarter.png"))?;
+    // The contact sheet: rest, the six expressions at s = 1, each AU's FACS muscles at full
+    // activation (the rows of the range-of-motion table), labelled.
+    let mut sheet = vec![("rest".to_string(), render(&model, &rest, &small))];
     for e in Expression::ALL {
         let state = valid_pose(
             &model,
@@ -208,6 +216,7 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
             &mut ws,
             &e.to_string(),
         )?;
+        sheet.push((format!("{e} (s = 1)"), render(&model, &state, &small)));
         write(&state, &frontal, out.join(format!("{e}.png")))?;
         write(&state, &side, out.join(format!("{e}_three_quarter.png")))?;
         if e == Expression::Joy {
@@ -218,11 +227,6 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
             write(&state, &overlay, out.join("joy_muscles.png"))?;
         }
     }
-    let small = RenderOptions {
-        width: 240,
-        height: 280,
-        ..frontal
-    };
     for (index, name) in control_names().iter().enumerate() {
         if name == "auxiliary" {
             continue;
@@ -235,18 +239,6 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
             &small,
             out.join("single").join(format!("{name}.png")),
         )?;
-    }
-    // The contact sheet: rest, the six expressions at s = 1, each AU's FACS muscles at full
-    // activation (the rows of the range-of-motion table), labelled.
-    let mut sheet = vec![("rest".to_string(), render(&model, &rest, &small))];
-    for e in Expression::ALL {
-        let state = valid_pose(
-            &model,
-            &weights.activations(e, 1.0),
-            &mut ws,
-            &e.to_string(),
-        )?;
-        sheet.push((format!("{e} (s = 1)"), render(&model, &state, &small)));
     }
     for row in read_reach(&default_reach_path())? {
         if row.row.contains('+') || row.row == "jaw_max" {

@@ -87,16 +87,7 @@ pub fn read_expressions(path: &Path) -> Result<ExpressionWeights, ExpressionFile
         path: path.to_path_buf(),
         source,
     };
-    let mut reader = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .from_path(path)
-        .map_err(csv_err)?;
-    let header: Vec<String> = reader
-        .headers()
-        .map_err(csv_err)?
-        .iter()
-        .map(str::to_string)
-        .collect();
+    let (header, records) = super::commented_csv(path).map_err(csv_err)?;
     if header != ["expression", "control", "weight", "reason"] {
         return Err(ExpressionFileError::Header {
             path: path.to_path_buf(),
@@ -104,9 +95,7 @@ pub fn read_expressions(path: &Path) -> Result<ExpressionWeights, ExpressionFile
         });
     }
     let mut weights = ExpressionWeights::default();
-    for record in reader.records() {
-        let record = record.map_err(csv_err)?;
-        let line = record.position().map_or(0, |p| p.line());
+    for (line, record) in records {
         let row_err = |message: String| ExpressionFileError::Row {
             path: path.to_path_buf(),
             line,

@@ -51,17 +51,11 @@ fn rows(path: &Path) -> Result<Vec<(u64, Vec<String>)>, FacsFileError> {
         path: path.to_path_buf(),
         source,
     };
-    let mut reader = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .from_path(path)
-        .map_err(err)?;
-    let mut out = Vec::new();
-    for record in reader.records() {
-        let record = record.map_err(err)?;
-        let line = record.position().map_or(0, |p| p.line());
-        out.push((line, record.iter().map(|s| s.trim().to_string()).collect()));
-    }
-    Ok(out)
+    let (_, records) = super::commented_csv(path).map_err(err)?;
+    Ok(records
+        .into_iter()
+        .map(|(line, record)| (line, record.iter().map(|s| s.trim().to_string()).collect()))
+        .collect())
 }
 
 pub fn read_facs(expression_aus: &Path, au_muscles: &Path) -> Result<FacsMaps, FacsFileError> {

@@ -23,3 +23,21 @@ pub fn data_path(rel: &str) -> PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
     }
 }
+
+/// A data file read whole: its header, then each record with its line number.
+pub(crate) type CsvRows = (Vec<String>, Vec<(u64, csv::StringRecord)>);
+
+/// A data file's rows: its header and each record with its line, `#` lines skipped. The
+/// files of `experiments/` all read this way; each checks its own header and cells.
+pub(crate) fn commented_csv(path: &Path) -> Result<CsvRows, csv::Error> {
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)?;
+    let header = reader.headers()?.iter().map(str::to_string).collect();
+    let mut rows = Vec::new();
+    for record in reader.records() {
+        let record = record?;
+        rows.push((record.position().map_or(0, |p| p.line()), record));
+    }
+    Ok((header, rows))
+}

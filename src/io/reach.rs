@@ -133,16 +133,7 @@ pub fn read_reach(path: &Path) -> Result<Vec<ReachRow>, ReachFileError> {
         path: path.to_path_buf(),
         source,
     };
-    let mut reader = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .from_path(path)
-        .map_err(csv_err)?;
-    let header: Vec<String> = reader
-        .headers()
-        .map_err(csv_err)?
-        .iter()
-        .map(str::to_string)
-        .collect();
+    let (header, records) = super::commented_csv(path).map_err(csv_err)?;
     if header != HEADER {
         return Err(ReachFileError::Header {
             path: path.to_path_buf(),
@@ -150,9 +141,7 @@ pub fn read_reach(path: &Path) -> Result<Vec<ReachRow>, ReachFileError> {
         });
     }
     let mut rows = Vec::new();
-    for record in reader.records() {
-        let record = record.map_err(csv_err)?;
-        let line = record.position().map_or(0, |p| p.line());
+    for (line, record) in records {
         let row_err = |message: String| ReachFileError::Row {
             path: path.to_path_buf(),
             line,

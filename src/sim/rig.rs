@@ -81,7 +81,7 @@ pub struct LidParams {
     pub max_closure: f64,
     /// Palpebral aperture the rest face is opened to where the mesh's is narrower (m).
     /// Default 10.5 mm, within adults' 9.7 +/- 1.2 mm in primary gaze (Read et al. 2006); the
-    /// canonical face has 6.2 mm, too narrow for the upper lid to travel the 8-12 mm of a
+    /// canonical face has 6.7 mm, too narrow for the upper lid to travel the 8-12 mm of a
     /// full closure. Toward the wide end so it does with the lower lid taking 15%.
     pub rest_aperture: f64,
     /// How far from the eyeball centre the opening of the upper lid reaches (m). Default

@@ -1513,7 +1513,7 @@ mod tests {
         // not hide it.
         let reference = lips_crossed.then(no_lip_contact_model);
         let mut ws_ref = reference.as_ref().map(Workspace::new);
-        let mut energy_of = |y: &[V3]| {
+        let energy_of = |y: &[V3]| {
             energy(m, &pose, y) - reference.as_ref().map_or(0.0, |r| energy(r, &pose, y))
         };
         let mut gradient_of =
