@@ -17,6 +17,7 @@ use facelab::experiments::run;
 use facelab::experiments::transfer;
 use facelab::io::atomic::write_atomic;
 use facelab::io::calibration::default_calibration_path;
+use facelab::io::observer_fit::{read_any_calibration, readout_csv, DEFAULT_READOUT};
 use facelab::learn::Normalization;
 use facelab::observe::AU_NAMES;
 use facelab::report::render::{Camera, RenderOptions};
@@ -128,13 +129,28 @@ enum Command {
         out: PathBuf,
     },
     /// Read the 17 OpenFace AUs: of the simulated face (--expression/--activation), of a
-    /// real OpenFace file's 3D landmarks (--openface), or recompute the AU gains (--calibrate).
+    /// real OpenFace file's 3D landmarks (--openface), recompute the AU gains (--calibrate), or
+    /// fit the observer to OpenFace on real faces (--fit).
     Observe {
         #[command(flatten)]
         face: FaceArgs,
-        /// AU calibration table [default: experiments/au_calibration.csv]
+        /// AU calibration table: gains (experiments/au_calibration.csv, the default) or a
+        /// fitted readout (experiments/au_observer_fit.csv); with --fit, the gains compared
         #[arg(long)]
         calibration: Option<PathBuf>,
+        /// Fit the observer's readout to the AUs of the real OpenFace files of --realdata,
+        /// validate it leave-one-person-out, and write the readout (--out) and the report
+        #[arg(long, conflicts_with_all = ["calibrate", "openface"])]
+        fit: bool,
+        /// With --fit: the list of real files (file,person,licence)
+        #[arg(long, default_value = "experiments/realdata.csv")]
+        realdata: PathBuf,
+        /// With --fit: the folder the listed files are in [default: ../shared/realdata]
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// With --fit: where the validation report (lopo.csv) goes
+        #[arg(long, default_value = "results/observer_fit")]
+        report: PathBuf,
         /// Recompute `raw` and `gain` of the calibration table from the model and rewrite it
         #[arg(long)]
         calibrate: bool,
@@ -146,7 +162,8 @@ enum Command {
         /// The neutral face: this frame's landmarks [default: the per-landmark median]
         #[arg(long)]
         neutral_frame: Option<i64>,
-        /// Where to write our AUs (OpenFace layout) for --openface
+        /// Where to write our AUs (OpenFace layout) for --openface; the readout for --fit
+        /// [default with --fit: experiments/au_observer_fit.csv]
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -371,29 +388,48 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             face,
             calibration,
             calibrate,
+            fit,
+            realdata,
+            data,
+            report,
             pose,
             openface,
             neutral_frame,
             out,
         } => {
             let path = calibration.unwrap_or_else(default_calibration_path);
-            let table = observe::load_calibration(&path)?;
             let stdout = &mut std::io::stdout().lock();
-            if calibrate {
-                let updated = observe::calibrate(&face.source(), &table)?;
-                write_atomic(&path, updated.to_csv().as_bytes())
-                    .with_context(|| format!("{}: cannot write", path.display()))?;
-                println!("wrote {}", path.display());
-            } else if let Some(input) = openface {
+            if let Some(input) = openface {
                 let out = out.expect("clap requires --out with --openface");
                 let neutral = match neutral_frame {
                     Some(f) => observe::Neutral::Frame(f),
                     None => observe::Neutral::Median,
                 };
-                let agreement =
-                    observe::observe_openface(&input, &out, neutral, table.calibration())?;
+                let calibration = read_any_calibration(&path)?;
+                let agreement = observe::observe_openface(&input, &out, neutral, calibration)?;
                 observe::print_agreement(&agreement, stdout)?;
                 println!("wrote {}", out.display());
+                return Ok(());
+            }
+            let table = observe::load_calibration(&path)?;
+            if fit {
+                let root = data.unwrap_or_else(observe::default_realdata_root);
+                let out = out.unwrap_or_else(|| PathBuf::from(DEFAULT_READOUT));
+                let result = observe::fit_observer(&realdata, &root, &table.calibration())?;
+                let report_path = report.join("lopo.csv");
+                let report_bytes = observe::report_csv(&result.report)?;
+                let readout_text = readout_csv(&result.readout, &result.provenance);
+                write_atomic(&report_path, &report_bytes)
+                    .with_context(|| format!("{}: cannot write", report_path.display()))?;
+                write_atomic(&out, readout_text.as_bytes())
+                    .with_context(|| format!("{}: cannot write", out.display()))?;
+                observe::print_fit_summary(&result.report, stdout)?;
+                println!("wrote {} and {}", out.display(), report_path.display());
+            } else if calibrate {
+                let updated = observe::calibrate(&face.source(), &table)?;
+                write_atomic(&path, updated.to_csv().as_bytes())
+                    .with_context(|| format!("{}: cannot write", path.display()))?;
+                println!("wrote {}", path.display());
             } else {
                 let request = pose.request()?;
                 let source = face.source();

@@ -154,3 +154,145 @@ fn each_expression_reads_its_prototype_aus_in_openface_range() {
         assert!(aus[top] <= 4.0 && aus[top] >= 1.5, "{e}: {aus:?}");
     }
 }
+
+/// A real-data list naming the committed py-feat file as two people (the validation needs two).
+fn pyfeat_list(dir: &std::path::Path) -> std::path::PathBuf {
+    let list = dir.join("realdata.csv");
+    std::fs::write(
+        &list,
+        "# test list\nfile,person,licence\nOpenFace_Test.csv,a,MIT\nOpenFace_Test.csv,b,MIT\n",
+    )
+    .unwrap();
+    list
+}
+
+fn fit_args<'a>(list: &'a str, data: &'a str, out: &'a str, report: &'a str) -> Vec<&'a str> {
+    vec![
+        "observe",
+        "--fit",
+        "--realdata",
+        list,
+        "--data",
+        data,
+        "--out",
+        out,
+        "--report",
+        report,
+    ]
+}
+
+#[test]
+fn observe_fit_writes_a_readout_that_names_its_data_and_reads_back() {
+    let dir = super::temp("observe", "fit");
+    let list = pyfeat_list(&dir);
+    let data = super::root().join("assets/openface/py-feat");
+    let (list_s, data_s) = (list.to_str().unwrap(), data.to_str().unwrap());
+    let mut tables = Vec::new();
+    for run in ["one", "two"] {
+        let out = dir.join(format!("{run}.csv"));
+        let report = dir.join(format!("report-{run}"));
+        let o = super::facelab(&fit_args(
+            list_s,
+            data_s,
+            out.to_str().unwrap(),
+            report.to_str().unwrap(),
+        ));
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            stdout.contains("AU45") && stdout.contains("mean"),
+            "{stdout}"
+        );
+        let table = std::fs::read_to_string(&out).unwrap();
+        // The readout names the data it came from, by content.
+        assert!(
+            table.contains("OpenFace_Test.csv")
+                && table
+                    .contains("88fa898104999a4079c70f4f32e5b50d2b8fd80c546a4edb5e413e9af03649bc")
+                && table.contains("100 frames"),
+            "{table}"
+        );
+        let readout = facelab::io::observer_fit::read_readout(&out).unwrap();
+        assert!(readout.weights.iter().flatten().all(|&w| w >= 0.0));
+        let report = std::fs::read_to_string(report.join("lopo.csv")).unwrap();
+        assert!(report.starts_with("observer,scope,au,frames,pearson_r,mae\n"));
+        assert!(report.contains("fitted,pooled,AU45,200,") && report.contains("gains,a,mean,100,"));
+        tables.push(table);
+    }
+    assert_eq!(tables[0], tables[1], "the fit is deterministic");
+
+    // The fitted readout is an observer calibration: observe a file with it.
+    let observed = dir.join("observed.csv");
+    let o = super::facelab(&[
+        "observe",
+        "--openface",
+        data.join("OpenFace_Test.csv").to_str().unwrap(),
+        "--calibration",
+        dir.join("one.csv").to_str().unwrap(),
+        "--out",
+        observed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = facelab::io::openface::read_openface(&observed)
+        .unwrap()
+        .rows;
+    assert_eq!(rows.len(), 100);
+    assert!(rows
+        .iter()
+        .flat_map(|r| r.aus)
+        .all(|a| (0.0..=5.0).contains(&a)));
+    // Blinks are what geometry carries best: the fitted AU45 follows OpenFace's.
+    let theirs = facelab::io::openface::read_openface(&data.join("OpenFace_Test.csv")).unwrap();
+    let a: Vec<f64> = rows.iter().map(|r| r.aus[16]).collect();
+    let b: Vec<f64> = theirs.rows.iter().map(|r| r.aus[16]).collect();
+    assert!(facelab::stats::pearson(&a, &b) > 0.7);
+}
+
+#[test]
+fn observe_fit_says_what_it_needs_and_writes_nothing_on_error() {
+    let dir = super::temp("observe", "fit-errors");
+    let list = pyfeat_list(&dir);
+    let out = dir.join("fit.csv");
+    let report = dir.join("report");
+    let missing = dir.join("no-such-folder");
+    let o = super::facelab(&fit_args(
+        list.to_str().unwrap(),
+        missing.to_str().unwrap(),
+        out.to_str().unwrap(),
+        report.to_str().unwrap(),
+    ));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("no-such-folder") && err.contains("realdata.csv") && err.contains("--data"),
+        "{err}"
+    );
+    assert!(!out.exists() && !report.exists());
+
+    std::fs::write(&list, "file,who\nOpenFace_Test.csv,a\n").unwrap();
+    let data = super::root().join("assets/openface/py-feat");
+    let o = super::facelab(&fit_args(
+        list.to_str().unwrap(),
+        data.to_str().unwrap(),
+        out.to_str().unwrap(),
+        report.to_str().unwrap(),
+    ));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("realdata.csv:1") && err.contains("file,person,licence"),
+        "{err}"
+    );
+
+    std::fs::write(&list, "file,person,licence\nOpenFace_Test.csv,a,MIT\n").unwrap();
+    let o = super::facelab(&fit_args(
+        list.to_str().unwrap(),
+        data.to_str().unwrap(),
+        out.to_str().unwrap(),
+        report.to_str().unwrap(),
+    ));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("at least two people"), "{err}");
+    assert!(!out.exists() && !report.exists());
+}

@@ -8,11 +8,15 @@ use anyhow::{bail, Context, Result};
 
 use super::face::{pose, FaceSource};
 use crate::io::calibration::{read_calibration, CalibrationTable};
-use crate::io::openface::{read_openface, write_openface, FaceRow};
-use crate::observe::au::{Calibration, Observation, Observer};
+use crate::io::observer_fit::read_realdata;
+use crate::io::openface::{read_openface, write_openface, FaceRow, OpenFaceFile};
+use crate::observe::au::{Calibration, FittedReadout, Observation, Observer};
+use crate::observe::features::inputs;
+use crate::observe::fit::{fit_readout, leave_one_person_out, PersonFrames};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES, LANDMARK_COUNT};
 use crate::sim::geom::V3;
 use crate::sim::{Activations, FaceModel, State, Workspace};
+use crate::stats::{mean_abs_diff, pearson};
 
 /// The observer of the base model: its rest landmarks are the neutral face.
 pub fn model_observer(model: &FaceModel, calibration: Calibration) -> Result<Observer> {
@@ -36,9 +40,7 @@ pub fn load_calibration(path: &Path) -> Result<CalibrationTable> {
 /// activations read its target; returns the new table (the caller writes it).
 pub fn calibrate(source: &FaceSource, table: &CalibrationTable) -> Result<CalibrationTable> {
     let model = source.model()?;
-    let unit = Calibration {
-        gains: [1.0; AU_COUNT],
-    };
+    let unit = Calibration::Gains([1.0; AU_COUNT]);
     let observer = model_observer(&model, unit)?;
     let mut ws = Workspace::new(&model);
     let mut out = table.clone();
@@ -122,29 +124,8 @@ pub(crate) fn median(values: &mut [f64]) -> f64 {
     }
 }
 
-pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-    }
-    if saa == 0.0 || sbb == 0.0 {
-        f64::NAN
-    } else {
-        sab / (saa * sbb).sqrt()
-    }
-}
-
-/// `facelab observe --openface IN --out OUT`.
-pub fn observe_openface(
-    input: &Path,
-    out: &Path,
-    neutral: Neutral,
-    calibration: Calibration,
-) -> Result<Agreement> {
+/// An OpenFace file our observer can read: with 3D landmarks and at least one used row.
+fn read_observable(input: &Path) -> Result<OpenFaceFile> {
     let file = read_openface(input)?;
     if !file.layout.landmarks_3d {
         bail!(
@@ -160,12 +141,24 @@ pub fn observe_openface(
             file.skipped
         );
     }
-    let faces: Vec<[V3; LANDMARK_COUNT]> = file
-        .rows
+    Ok(file)
+}
+
+/// The used rows' 3D landmarks in our frame (the file's layout has them).
+fn camera_faces(file: &OpenFaceFile) -> Vec<[V3; LANDMARK_COUNT]> {
+    file.rows
         .iter()
         .map(|r| from_camera(r.landmarks_3d.as_ref().expect("3D layout checked")))
-        .collect();
-    let neutral_face = match neutral {
+        .collect()
+}
+
+/// The neutral face of a file's `faces`.
+fn neutral_of(
+    file: &OpenFaceFile,
+    faces: &[[V3; LANDMARK_COUNT]],
+    neutral: Neutral,
+) -> Result<[V3; LANDMARK_COUNT]> {
+    Ok(match neutral {
         Neutral::Median => std::array::from_fn(|i| {
             std::array::from_fn(|k| {
                 let mut v: Vec<f64> = faces.iter().map(|f| f[i][k]).collect();
@@ -177,10 +170,24 @@ pub fn observe_openface(
                 .rows
                 .iter()
                 .position(|r| r.frame == frame)
-                .with_context(|| format!("{}: no used row with frame {frame}", input.display()))?;
+                .with_context(|| {
+                    format!("{}: no used row with frame {frame}", file.path.display())
+                })?;
             faces[row]
         }
-    };
+    })
+}
+
+/// `facelab observe --openface IN --out OUT`.
+pub fn observe_openface(
+    input: &Path,
+    out: &Path,
+    neutral: Neutral,
+    calibration: Calibration,
+) -> Result<Agreement> {
+    let file = read_observable(input)?;
+    let faces = camera_faces(&file);
+    let neutral_face = neutral_of(&file, &faces, neutral)?;
     let observer = Observer::new(&neutral_face, calibration)
         .with_context(|| format!("{}: neutral face", input.display()))?;
     let mut rows = Vec::with_capacity(file.rows.len());
@@ -203,12 +210,7 @@ pub fn observe_openface(
         let ours: Vec<f64> = rows.iter().map(|r| r.aus[k]).collect();
         let theirs: Vec<f64> = file.rows.iter().map(|r| r.aus[k]).collect();
         pearson_r[k] = pearson(&ours, &theirs);
-        mad[k] = ours
-            .iter()
-            .zip(&theirs)
-            .map(|(a, b)| (a - b).abs())
-            .sum::<f64>()
-            / ours.len() as f64;
+        mad[k] = mean_abs_diff(&ours, &theirs);
     }
     Ok(Agreement {
         rows: rows.len(),
@@ -231,6 +233,202 @@ pub fn print_agreement(a: &Agreement, out: &mut impl Write) -> Result<()> {
             "{} {:.3} {:.3}",
             AU_NAMES[k], a.pearson[k], a.mean_abs_diff[k]
         )?;
+    }
+    Ok(())
+}
+
+/// Where `observe --fit` reads the real files from when not told: `../shared/realdata` of the
+/// working folder, else beside the checkout.
+pub fn default_realdata_root() -> std::path::PathBuf {
+    let local = std::path::PathBuf::from("../shared/realdata");
+    if local.exists() {
+        local
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/realdata")
+    }
+}
+
+/// One row of the validation report: how well an observer reproduces OpenFace's AU on the
+/// frames of `scope` (a held-out person, or `pooled` over all held-out frames).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct AgreementRow {
+    pub observer: String,
+    pub scope: String,
+    pub au: String,
+    pub frames: usize,
+    pub pearson_r: f64,
+    pub mae: f64,
+}
+
+/// What `observe --fit` produces.
+pub struct ObserverFit {
+    /// Fitted on every listed file.
+    pub readout: FittedReadout,
+    /// Provenance: the files, people, licences and SHA-256 the readout was fitted on.
+    pub provenance: Vec<String>,
+    /// Leave-one-person-out agreement of the fitted readout, beside that of the gains.
+    pub report: Vec<AgreementRow>,
+}
+
+fn round4(v: f64) -> f64 {
+    (v * 1e4).round() / 1e4
+}
+
+/// Per-AU agreement rows (and a `mean` row over the AUs with a defined r) of `ours` against
+/// `theirs`.
+fn agreement_rows(
+    observer: &str,
+    scope: &str,
+    ours: &[[f64; AU_COUNT]],
+    theirs: &[[f64; AU_COUNT]],
+) -> Vec<AgreementRow> {
+    let mut rows = Vec::new();
+    for (k, au) in AU_NAMES.iter().enumerate() {
+        let a: Vec<f64> = ours.iter().map(|r| r[k]).collect();
+        let b: Vec<f64> = theirs.iter().map(|r| r[k]).collect();
+        rows.push(AgreementRow {
+            observer: observer.into(),
+            scope: scope.into(),
+            au: au.to_string(),
+            frames: a.len(),
+            pearson_r: round4(pearson(&a, &b)),
+            mae: round4(mean_abs_diff(&a, &b)),
+        });
+    }
+    let rs: Vec<f64> = rows
+        .iter()
+        .map(|r| r.pearson_r)
+        .filter(|r| r.is_finite())
+        .collect();
+    let mae = rows.iter().map(|r| r.mae).sum::<f64>() / rows.len() as f64;
+    rows.push(AgreementRow {
+        observer: observer.into(),
+        scope: scope.into(),
+        au: "mean".into(),
+        frames: ours.len(),
+        pearson_r: round4(rs.iter().sum::<f64>() / rs.len().max(1) as f64),
+        mae: round4(mae),
+    });
+    rows
+}
+
+/// `facelab observe --fit`: fits the readout on the real OpenFace files of `list` (paths
+/// relative to `root`), each file's neutral face its per-landmark median, and validates it
+/// leave-one-person-out against the model-anchored `gains`.
+pub fn fit_observer(list: &Path, root: &Path, gains: &Calibration) -> Result<ObserverFit> {
+    let files = read_realdata(list)?;
+    if !root.is_dir() {
+        bail!(
+            "{}: the real OpenFace files {} lists are not here; pass --data DIR with the \
+             folder that holds them (the project's ../shared/realdata)",
+            root.display(),
+            list.display()
+        );
+    }
+    let mut people: Vec<PersonFrames> = Vec::new();
+    let mut before: Vec<Vec<[f64; AU_COUNT]>> = Vec::new();
+    let mut provenance = vec![format!(
+        "Fitted by `facelab observe --fit` on the real OpenFace files of {} (each file's \
+         neutral face is its per-landmark median):",
+        list.display()
+    )];
+    for f in &files {
+        let path = root.join(&f.file);
+        let bytes =
+            std::fs::read(&path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let file = read_observable(&path)?;
+        let faces = camera_faces(&file);
+        let neutral = neutral_of(&file, &faces, Neutral::Median)?;
+        let observer = Observer::new(&neutral, gains.clone())
+            .with_context(|| format!("{}: neutral face", path.display()))?;
+        let k = match people.iter().position(|p| p.person == f.person) {
+            Some(k) => k,
+            None => {
+                people.push(PersonFrames {
+                    person: f.person.clone(),
+                    inputs: Vec::new(),
+                    aus: Vec::new(),
+                });
+                before.push(Vec::new());
+                people.len() - 1
+            }
+        };
+        for (row, face) in file.rows.iter().zip(&faces) {
+            let at = || format!("{}:{}", path.display(), row.line);
+            let (features, _) = observer.features(face).with_context(at)?;
+            people[k].inputs.push(inputs(&features));
+            people[k].aus.push(row.aus);
+            before[k].push(observer.observe(face).with_context(at)?.aus);
+        }
+        provenance.push(format!(
+            "  {} (person {}, {}, {} frames, {} skipped, sha256 {})",
+            f.file.display(),
+            f.person,
+            f.licence,
+            file.rows.len(),
+            file.skipped,
+            crate::cache::sha256(&bytes)
+        ));
+    }
+    let held_out = leave_one_person_out(&people)
+        .with_context(|| format!("{}: leave-one-person-out fit", list.display()))?;
+    let mut report = Vec::new();
+    let all_theirs: Vec<[f64; AU_COUNT]> =
+        people.iter().flat_map(|p| p.aus.iter().copied()).collect();
+    for (name, ours) in [("gains", &before), ("fitted", &held_out)] {
+        let pooled: Vec<[f64; AU_COUNT]> = ours.iter().flatten().copied().collect();
+        report.extend(agreement_rows(name, "pooled", &pooled, &all_theirs));
+        for (p, o) in people.iter().zip(ours.iter()) {
+            report.extend(agreement_rows(name, &p.person, o, &p.aus));
+        }
+    }
+    let x: Vec<_> = people
+        .iter()
+        .flat_map(|p| p.inputs.iter().copied())
+        .collect();
+    let readout = fit_readout(&x, &all_theirs)
+        .with_context(|| format!("{}: fit on every file", list.display()))?;
+    provenance.push(format!(
+        "{} frames of {} people; per AU a nonnegative least-squares fit (src/observe/fit.rs, \
+         ridge {:e} of the Gram matrix's mean diagonal), stretched so its readings spread like \
+         OpenFace's. Validation: results/observer_fit/lopo.csv.",
+        x.len(),
+        people.len(),
+        crate::observe::fit::RIDGE
+    ));
+    Ok(ObserverFit {
+        readout,
+        provenance,
+        report,
+    })
+}
+
+/// Writes the report as CSV (`observer,scope,au,frames,pearson_r,mae`).
+pub fn report_csv(rows: &[AgreementRow]) -> Result<Vec<u8>> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    for r in rows {
+        w.serialize(r)?;
+    }
+    Ok(w.into_inner()?)
+}
+
+/// Prints, per AU, the pooled held-out r and MAE of the gains and of the fitted readout.
+pub fn print_fit_summary(rows: &[AgreementRow], out: &mut impl Write) -> Result<()> {
+    writeln!(
+        out,
+        "leave-one-person-out, pooled over held-out people: pearson r and MAE"
+    )?;
+    writeln!(out, "au gains_r fitted_r gains_mae fitted_mae")?;
+    let pooled = |observer: &str, au: &str| {
+        rows.iter()
+            .find(|r| r.observer == observer && r.scope == "pooled" && r.au == au)
+            .map(|r| (r.pearson_r, r.mae))
+            .unwrap_or((f64::NAN, f64::NAN))
+    };
+    for au in AU_NAMES.iter().copied().chain(["mean"]) {
+        let (gr, gm) = pooled("gains", au);
+        let (fr, fm) = pooled("fitted", au);
+        writeln!(out, "{au} {gr:.3} {fr:.3} {gm:.3} {fm:.3}")?;
     }
     Ok(())
 }

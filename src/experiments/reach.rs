@@ -15,10 +15,11 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::face::FaceSource;
-use super::observe::{load_calibration, model_observer};
+use super::observe::model_observer;
 use crate::io::atomic::write_atomic;
 use crate::io::calibration::default_calibration_path;
 use crate::io::expressions::controls_activations;
+use crate::io::observer_fit::read_any_calibration;
 use crate::io::reach::{csv_text, read_reach, Measure, ReachLine, ReachRow};
 use crate::observe::au::{Observer, AU_COUNT, AU_NAMES};
 use crate::observe::landmarks;
@@ -182,7 +183,7 @@ pub fn write_reach(
     let calibration_path = calibration
         .map(Path::to_path_buf)
         .unwrap_or_else(default_calibration_path);
-    let observer = model_observer(&model, load_calibration(&calibration_path)?.calibration())?;
+    let observer = model_observer(&model, read_any_calibration(&calibration_path)?)?;
     let measured = reach(&model, &observer, &rows)?;
     let lines: Vec<ReachLine> = measured
         .iter()
@@ -229,7 +230,13 @@ pub fn write_reach(
     let figure = out.join("muscle_au_matrix.png");
     heat_map(
         &figure,
-        "Observer AUs (0-5) of each muscle group (both sides) and jaw input at full activation",
+        &format!(
+            "Observer AUs (0-5, {}) of each muscle group (both sides) and jaw input at full \
+             activation",
+            calibration_path
+                .file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+        ),
         &matrix.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>(),
         &AU_NAMES.map(String::from),
         &matrix.iter().map(|(_, a)| a.to_vec()).collect::<Vec<_>>(),

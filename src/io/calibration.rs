@@ -54,9 +54,7 @@ pub enum CalibrationFileError {
 
 impl CalibrationTable {
     pub fn calibration(&self) -> Calibration {
-        Calibration {
-            gains: std::array::from_fn(|k| self.rows[k].gain),
-        }
+        Calibration::Gains(std::array::from_fn(|k| self.rows[k].gain))
     }
 
     /// The activations an AU is calibrated on.

@@ -8,6 +8,7 @@ pub mod curves;
 pub mod expressions;
 pub mod facs;
 pub mod mesh;
+pub mod observer_fit;
 pub mod openface;
 pub mod reach;
 

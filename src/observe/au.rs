@@ -37,6 +37,7 @@
 use crate::rng::Stream;
 use crate::sim::geom::{norm, sub, Rot3, V3};
 
+use super::features::{features, inputs, FEATURE_COUNT, INPUT_COUNT};
 use super::landmarks::LANDMARK_COUNT;
 use super::pose::{align, HeadPose};
 
@@ -64,10 +65,37 @@ pub const STABLE: [usize; 6] = [0, 16, 36, 39, 42, 45];
 /// Highest intensity on OpenFace's scale.
 pub const AU_MAX: f64 = 5.0;
 
-/// Per-AU gains: intensity = gain x measure (measure in IOD units, or a fraction for AU45).
+/// How the observer turns what it measures into intensities.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Calibration {
-    pub gains: [f64; AU_COUNT],
+pub enum Calibration {
+    /// Per-AU gains anchored on the model: intensity = gain x the AU's own measure (IOD units,
+    /// or a fraction for AU45), `experiments/au_calibration.csv`.
+    Gains([f64; AU_COUNT]),
+    /// A readout fitted to OpenFace's AUs on real faces (`facelab observe --fit`).
+    Fitted(Box<FittedReadout>),
+}
+
+/// Intensity of AU k = `intercept[k] + weights[k] . inputs` (the positive and negative parts of
+/// `features::features`), clamped to [0, 5]; weights are nonnegative.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FittedReadout {
+    pub intercept: [f64; AU_COUNT],
+    pub weights: [[f64; INPUT_COUNT]; AU_COUNT],
+}
+
+impl FittedReadout {
+    /// The clamped intensities for these inputs.
+    pub fn read(&self, inputs: &[f64; INPUT_COUNT]) -> [f64; AU_COUNT] {
+        std::array::from_fn(|k| {
+            let v = self.intercept[k]
+                + self.weights[k]
+                    .iter()
+                    .zip(inputs)
+                    .map(|(w, x)| w * x)
+                    .sum::<f64>();
+            v.clamp(0.0, AU_MAX)
+        })
+    }
 }
 
 /// Detector error stand-in (DESIGN 2.2): each AU's gain is scaled by a per-subject factor
@@ -143,7 +171,7 @@ fn mean_of(p: &[V3; LANDMARK_COUNT], idx: &[usize]) -> V3 {
 }
 
 /// Mean vertical gap of the lid pairs (in whatever units `p` has).
-fn aperture(p: &[V3; LANDMARK_COUNT]) -> f64 {
+pub(crate) fn aperture(p: &[V3; LANDMARK_COUNT]) -> f64 {
     LID_PAIRS
         .iter()
         .map(|&(u, l)| p[u][1] - p[l][1])
@@ -256,13 +284,34 @@ impl Observer {
         Ok(std::array::from_fn(|i| sub(c[i], self.frame_neutral[i])))
     }
 
+    /// The features (`features::features`) of `current` and its head pose.
+    pub fn features(
+        &self,
+        current: &[V3; LANDMARK_COUNT],
+    ) -> Result<([f64; FEATURE_COUNT], HeadPose), ObserveError> {
+        let (c, r) = self.aligned(current)?;
+        Ok((
+            features(&self.frame_neutral, &c, self.aperture),
+            HeadPose::from_rotation(&r),
+        ))
+    }
+
     /// Intensities (0..5) and head pose of `current`.
     pub fn observe(&self, current: &[V3; LANDMARK_COUNT]) -> Result<Observation, ObserveError> {
-        let (raw, pose) = self.measure(current)?;
-        let aus = std::array::from_fn(|k| {
-            (self.calibration.gains[k] * raw[k].max(0.0)).clamp(0.0, AU_MAX)
-        });
-        Ok(Observation { aus, pose })
+        match &self.calibration {
+            Calibration::Gains(gains) => {
+                let (raw, pose) = self.measure(current)?;
+                let aus = std::array::from_fn(|k| (gains[k] * raw[k].max(0.0)).clamp(0.0, AU_MAX));
+                Ok(Observation { aus, pose })
+            }
+            Calibration::Fitted(readout) => {
+                let (f, pose) = self.features(current)?;
+                Ok(Observation {
+                    aus: readout.read(&inputs(&f)),
+                    pose,
+                })
+            }
+        }
     }
 }
 
@@ -276,7 +325,7 @@ fn transpose_apply(r: &Rot3, v: V3) -> V3 {
 }
 
 /// The 17 measures from neutral `n` and current `c` landmarks (face frame, IOD units).
-fn measures(
+pub(crate) fn measures(
     n: &[V3; LANDMARK_COUNT],
     c: &[V3; LANDMARK_COUNT],
     neutral_aperture: f64,

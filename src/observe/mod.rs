@@ -2,6 +2,8 @@
 //! surface, head pose, and the 17 intensity AUs. Pure; uses only `sim` types.
 
 pub mod au;
+pub mod features;
+pub mod fit;
 pub mod landmarks;
 pub mod pose;
 
