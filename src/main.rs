@@ -148,6 +148,9 @@ enum Command {
         /// With --fit: the folder the listed files are in [default: ../shared/realdata]
         #[arg(long)]
         data: Option<PathBuf>,
+        /// With --fit: which inputs each AU may read (au,inputs,why; `*` for all)
+        #[arg(long, default_value = "experiments/au_readout_inputs.csv")]
+        inputs: PathBuf,
         /// With --fit: where the validation report (lopo.csv) goes
         #[arg(long, default_value = "results/observer_fit")]
         report: PathBuf,
@@ -391,6 +394,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             fit,
             realdata,
             data,
+            inputs,
             report,
             pose,
             openface,
@@ -415,7 +419,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if fit {
                 let root = data.unwrap_or_else(observe::default_realdata_root);
                 let out = out.unwrap_or_else(|| PathBuf::from(DEFAULT_READOUT));
-                let result = observe::fit_observer(&realdata, &root, &table.calibration())?;
+                let result =
+                    observe::fit_observer(&realdata, &root, &inputs, &table.calibration())?;
                 let report_path = report.join("lopo.csv");
                 let report_bytes = observe::report_csv(&result.report)?;
                 let readout_text = readout_csv(&result.readout, &result.provenance);

@@ -9,6 +9,7 @@ use crate::io::expressions::controls_activations;
 use crate::io::expressions::{default_expressions_path, read_expressions};
 use crate::io::mesh::{default_mesh_path, read_obj};
 use crate::io::reach::{default_reach_path, read_reach};
+use crate::observe::au::AU_NAMES;
 use crate::report::compose::contact_sheet;
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
@@ -241,7 +242,9 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
         )?;
     }
     for row in read_reach(&default_reach_path())? {
-        if row.row.contains('+') || row.row == "jaw_max" {
+        // One picture per AU: combined actions and second measures of an AU's face
+        // (`AU12_width`) are not AUs of their own.
+        if crate::observe::au::au_index(&row.row).is_none_or(|k| AU_NAMES[k] != row.row) {
             continue;
         }
         let a = controls_activations(&row.controls)

@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 
 use super::face::{pose, FaceSource};
 use crate::io::calibration::{read_calibration, CalibrationTable};
-use crate::io::observer_fit::read_realdata;
+use crate::io::observer_fit::{read_readout_inputs, read_realdata};
 use crate::io::openface::{read_openface, write_openface, FaceRow, OpenFaceFile};
 use crate::observe::au::{Calibration, FittedReadout, Observation, Observer};
 use crate::observe::features::inputs;
@@ -315,8 +315,14 @@ fn agreement_rows(
 /// `facelab observe --fit`: fits the readout on the real OpenFace files of `list` (paths
 /// relative to `root`), each file's neutral face its per-landmark median, and validates it
 /// leave-one-person-out against the model-anchored `gains`.
-pub fn fit_observer(list: &Path, root: &Path, gains: &Calibration) -> Result<ObserverFit> {
+pub fn fit_observer(
+    list: &Path,
+    root: &Path,
+    inputs_path: &Path,
+    gains: &Calibration,
+) -> Result<ObserverFit> {
     let files = read_realdata(list)?;
+    let allowed = read_readout_inputs(inputs_path)?;
     if !root.is_dir() {
         bail!(
             "{}: the real OpenFace files {} lists are not here; pass --data DIR with the \
@@ -370,7 +376,7 @@ pub fn fit_observer(list: &Path, root: &Path, gains: &Calibration) -> Result<Obs
             crate::cache::sha256(&bytes)
         ));
     }
-    let held_out = leave_one_person_out(&people)
+    let held_out = leave_one_person_out(&people, &allowed)
         .with_context(|| format!("{}: leave-one-person-out fit", list.display()))?;
     let mut report = Vec::new();
     let all_theirs: Vec<[f64; AU_COUNT]> =
@@ -386,15 +392,19 @@ pub fn fit_observer(list: &Path, root: &Path, gains: &Calibration) -> Result<Obs
         .iter()
         .flat_map(|p| p.inputs.iter().copied())
         .collect();
-    let readout = fit_readout(&x, &all_theirs)
+    let readout = fit_readout(&x, &all_theirs, &allowed)
         .with_context(|| format!("{}: fit on every file", list.display()))?;
+    let inputs_bytes = std::fs::read(inputs_path)
+        .with_context(|| format!("{}: cannot read", inputs_path.display()))?;
     provenance.push(format!(
         "{} frames of {} people; per AU a nonnegative least-squares fit (src/observe/fit.rs, \
-         ridge {:e} of the Gram matrix's mean diagonal), stretched so its readings spread like \
-         OpenFace's. Validation: results/observer_fit/lopo.csv.",
+         ridge {:e} of the Gram matrix's mean diagonal) on the inputs {} allows it (sha256 \
+         {}), stretched so its readings spread like OpenFace's.",
         x.len(),
         people.len(),
-        crate::observe::fit::RIDGE
+        crate::observe::fit::RIDGE,
+        inputs_path.display(),
+        crate::cache::sha256(&inputs_bytes)
     ));
     Ok(ObserverFit {
         readout,

@@ -14,19 +14,23 @@ use std::path::{Path, PathBuf};
 
 use crate::observe::au::{au_index, Calibration, FittedReadout, AU_COUNT, AU_NAMES};
 use crate::observe::features::{input_names, INPUT_COUNT};
+use crate::observe::fit::Allowed;
 
 use super::calibration::read_calibration;
 use super::commented_csv;
 
 pub const DEFAULT_READOUT: &str = "experiments/au_observer_fit.csv";
 pub const DEFAULT_REALDATA: &str = "experiments/realdata.csv";
+pub const DEFAULT_READOUT_INPUTS: &str = "experiments/au_readout_inputs.csv";
 
 const HEADER: [&str; 3] = ["au", "input", "weight"];
 const REALDATA_HEADER: [&str; 3] = ["file", "person", "licence"];
+const INPUTS_HEADER: [&str; 3] = ["au", "inputs", "why"];
 
 #[derive(Debug, thiserror::Error)]
 pub enum ObserverFileError {
-    #[error("{path}: {source}")]
+    /// The CSV layer's own error follows as the cause.
+    #[error("{path}")]
     Csv { path: PathBuf, source: csv::Error },
     #[error("{path}:{line}: {message}")]
     Row {
@@ -132,6 +136,58 @@ pub fn read_any_calibration(path: &Path) -> anyhow::Result<Calibration> {
     }
 }
 
+/// Reads which inputs each AU's readout may use: one row per AU, inputs joined by `;` (`*`
+/// for all of them), and a reason.
+pub fn read_readout_inputs(path: &Path) -> Result<Box<Allowed>, ObserverFileError> {
+    let row_err = |line, message| ObserverFileError::Row {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    let (header, rows) = commented_csv(path).map_err(|source| ObserverFileError::Csv {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if header != INPUTS_HEADER {
+        return Err(row_err(
+            1,
+            format!("header must be `{}`", INPUTS_HEADER.join(",")),
+        ));
+    }
+    let names = input_names();
+    let mut allowed = Box::new([[false; INPUT_COUNT]; AU_COUNT]);
+    let mut seen = [false; AU_COUNT];
+    for (line, record) in rows {
+        let au = au_index(&record[0])
+            .ok_or_else(|| row_err(line, format!("unknown AU `{}`", &record[0])))?;
+        if seen[au] {
+            return Err(row_err(line, format!("{} listed twice", AU_NAMES[au])));
+        }
+        seen[au] = true;
+        if record[2].trim().is_empty() {
+            return Err(row_err(line, format!("{}: say why (`why`)", AU_NAMES[au])));
+        }
+        for input in record[1].split(';').map(str::trim) {
+            if input == "*" {
+                allowed[au] = [true; INPUT_COUNT];
+                continue;
+            }
+            let j = names
+                .iter()
+                .position(|n| n == input)
+                .ok_or_else(|| row_err(line, format!("unknown input `{input}`")))?;
+            allowed[au][j] = true;
+        }
+    }
+    if let Some(k) = seen.iter().position(|s| !s) {
+        return Err(ObserverFileError::File {
+            path: path.to_path_buf(),
+            message: format!("no row for {}", AU_NAMES[k]),
+        });
+    }
+    Ok(allowed)
+}
+
 /// One real OpenFace file of the list.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RealFile {
@@ -207,6 +263,28 @@ mod tests {
         std::fs::write(&path, text.replace("AU04,intercept", "AU04,cheek")).unwrap();
         let e = read_readout(&path).unwrap_err().to_string();
         assert!(e.contains("unknown input `cheek`"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn the_shipped_input_lists_read_and_bad_ones_are_named() {
+        let shipped =
+            read_readout_inputs(&super::super::data_path(DEFAULT_READOUT_INPUTS)).unwrap();
+        let names = input_names();
+        let au12 = au_index("AU12").unwrap();
+        let m12 = names.iter().position(|n| n == "m_AU12+").unwrap();
+        assert!(shipped[au12][m12]);
+        assert!(shipped.iter().all(|row| row.iter().any(|&a| a)));
+
+        let dir = std::env::temp_dir().join(format!("facelab-inputs-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("inputs.csv");
+        std::fs::write(&path, "au,inputs,why\nAU01,m_AU01+;d_1_2+,brow\n").unwrap();
+        let e = read_readout_inputs(&path).unwrap_err().to_string();
+        assert!(e.contains("inputs.csv:2") && e.contains("`d_1_2+`"), "{e}");
+        std::fs::write(&path, "au,inputs,why\nAU01,*,all\n").unwrap();
+        let e = read_readout_inputs(&path).unwrap_err().to_string();
+        assert!(e.contains("no row for AU02"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -97,10 +97,18 @@ fn solve_passive(g: &[f64], b: &[f64], passive: &[bool]) -> Result<Vec<f64>, Fit
     Ok(s)
 }
 
-/// Fits the readout to frames `x` (inputs) and `y` (OpenFace's intensities).
+/// Which inputs each AU's readout may read (`allowed[au][input]`).
+pub type Allowed = [[bool; INPUT_COUNT]; AU_COUNT];
+
+/// Every input for every AU.
+pub const ALL_INPUTS: Allowed = [[true; INPUT_COUNT]; AU_COUNT];
+
+/// Fits the readout to frames `x` (inputs) and `y` (OpenFace's intensities), each AU on its
+/// `allowed` inputs.
 pub fn fit_readout(
     x: &[[f64; INPUT_COUNT]],
     y: &[[f64; AU_COUNT]],
+    allowed: &Allowed,
 ) -> Result<FittedReadout, FitError> {
     assert_eq!(x.len(), y.len());
     let rows = x.len();
@@ -150,8 +158,14 @@ pub fn fit_readout(
         weights: [[0.0; INPUT_COUNT]; AU_COUNT],
     };
     for k in 0..AU_COUNT {
-        let bk: Vec<f64> = b.iter().map(|r| r[k]).collect();
-        let mut w = nnls_gram(&g, &bk)?;
+        let idx: Vec<usize> = (0..n).filter(|&j| allowed[k][j]).collect();
+        let m = idx.len();
+        let sub_g: Vec<f64> = (0..m * m).map(|e| g[idx[e / m] * n + idx[e % m]]).collect();
+        let sub_b: Vec<f64> = idx.iter().map(|&j| b[j][k]).collect();
+        let mut w = vec![0.0; n];
+        for (&j, v) in idx.iter().zip(nnls_gram(&sub_g, &sub_b)?) {
+            w[j] = v;
+        }
         // Least squares shrinks its predictions toward the mean by their correlation with the
         // truth; an instrument must span the scale it reads on, so the fitted combination is
         // stretched until its spread over the frames matches OpenFace's (this leaves r as it
@@ -184,6 +198,7 @@ pub struct PersonFrames {
 /// everyone else (clamped to [0, 5], as the observer reads them).
 pub fn leave_one_person_out(
     people: &[PersonFrames],
+    allowed: &Allowed,
 ) -> Result<Vec<Vec<[f64; AU_COUNT]>>, FitError> {
     if people.len() < 2 {
         return Err(FitError::TooFewPeople(people.len()));
@@ -199,7 +214,7 @@ pub fn leave_one_person_out(
                     y.extend_from_slice(&q.aus);
                 }
             }
-            let readout = fit_readout(&x, &y)?;
+            let readout = fit_readout(&x, &y, allowed)?;
             Ok(p.inputs.iter().map(|r| readout.read(r)).collect())
         })
         .collect()
@@ -284,7 +299,15 @@ mod tests {
             x.push(xr);
             y.push(yr);
         }
-        let readout = fit_readout(&x, &y).unwrap();
+        let readout = fit_readout(&x, &y, &ALL_INPUTS).unwrap();
+        let mut only_three = [[false; INPUT_COUNT]; AU_COUNT];
+        only_three[0][3] = true;
+        let narrow = fit_readout(&x, &y, &only_three).unwrap();
+        assert!(narrow.weights[0]
+            .iter()
+            .enumerate()
+            .all(|(j, &w)| j == 3 || w == 0.0));
+        assert!(narrow.weights[0][3] > 1.0);
         let pred = readout.read(&x[5]);
         assert!(
             (pred[0] - y[5][0]).abs() < 0.02,
@@ -296,14 +319,20 @@ mod tests {
         assert!((readout.weights[0][3] - 2.0).abs() < 0.05);
         assert!(pred[1].abs() < 1e-9);
 
-        assert_eq!(fit_readout(&[], &[]), Err(FitError::Empty));
+        assert_eq!(fit_readout(&[], &[], &ALL_INPUTS), Err(FitError::Empty));
         x[7][2] = f64::NAN;
-        assert_eq!(fit_readout(&x, &y), Err(FitError::NonFinite { frame: 7 }));
+        assert_eq!(
+            fit_readout(&x, &y, &ALL_INPUTS),
+            Err(FitError::NonFinite { frame: 7 })
+        );
         let one = PersonFrames {
             person: "a".into(),
             inputs: vec![],
             aus: vec![],
         };
-        assert_eq!(leave_one_person_out(&[one]), Err(FitError::TooFewPeople(1)));
+        assert_eq!(
+            leave_one_person_out(&[one], &ALL_INPUTS),
+            Err(FitError::TooFewPeople(1))
+        );
     }
 }
