@@ -79,6 +79,23 @@ fn spec_errors_name_file_line_column_and_key() {
             && e.contains(">= 0"),
         "{e}"
     );
+    let e = spec_error("[dataset]\nfamily = \"wide\"\n", &[]);
+    assert!(
+        e.contains("s.toml:2:1") && e.contains("dataset.family") && e.contains("paper, broad"),
+        "{e}"
+    );
+    let e = spec_error("[observer]\ncalibration = \"nope.csv\"\n", &[]);
+    assert!(
+        e.contains("s.toml:2:1")
+            && e.contains("observer.calibration")
+            && e.contains("no such file"),
+        "{e}"
+    );
+    let e = spec_error("[realfaces]\nframe_stride = 0\n", &[]);
+    assert!(
+        e.contains("realfaces.frame_stride") && e.contains("outside"),
+        "{e}"
+    );
     let e = spec_error("[sweep]\n\"train.epoch\" = [1, 2]\n", &[]);
     assert!(
         e.contains("s.toml:2") && e.contains("sweep") && e.contains("train.epoch"),
@@ -102,6 +119,36 @@ fn spec_errors_name_file_line_column_and_key() {
     assert!(
         err.contains("train.learning_rate") && err.contains("must be positive"),
         "{err}"
+    );
+}
+
+/// Keys added later are recorded (in cache keys and a run's `spec.toml`) only where a spec sets
+/// them, so the committed runs of the paper's specs keep their keys.
+#[test]
+fn later_keys_change_nothing_for_specs_that_do_not_set_them() {
+    for name in ["paper", "table1", "smoke"] {
+        let cells = spec::load(&root().join(format!("experiments/{name}.toml")), &[]).unwrap();
+        let keys: Vec<&String> = cells[0].spec.values.keys().collect();
+        for later in ["dataset.family", "observer.calibration", "realfaces."] {
+            assert!(
+                !keys.iter().any(|k| k.starts_with(later)),
+                "{name}.toml records {later}"
+            );
+        }
+    }
+    let cells = spec::load(&root().join("experiments/realfaces.toml"), &[]).unwrap();
+    let s = &cells[0].spec;
+    assert_eq!(
+        s.dataset.family,
+        facelab::experiments::dataset::Family::Broad
+    );
+    assert_eq!(s.calibration, "experiments/au_observer_fit.csv");
+    assert!(s.values.contains_key("realfaces.frame_stride"));
+    let sweep = spec::load(&root().join("experiments/ablations/family.toml"), &[]).unwrap();
+    let names: Vec<&str> = sweep.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(
+        names,
+        ["dataset.family=\"paper\"", "dataset.family=\"broad\""]
     );
 }
 

@@ -8,6 +8,7 @@ mod neck;
 mod observe;
 mod openface;
 mod reach;
+mod realfaces;
 mod sim;
 mod transfer;
 

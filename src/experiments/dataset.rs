@@ -1,6 +1,10 @@
 //! The dataset stage (DESIGN 3, paper 4.2): for each expression, pairs (AUs, activations)
-//! made by the model itself: a = w_e * s with s ~ U[0, 1], jaw rotation ~ U[0, 1], slide and
-//! twist neutral; solve; observe.
+//! made by the model itself: activations drawn from a family, solve, observe.
+//!
+//! Families (`dataset.family`):
+//! - `paper` (Zeng et al. 4.2, the default): a = w_e * s with s ~ U[0, 1], jaw rotation
+//!   ~ U[0, 1], slide and twist neutral. Two numbers per sample.
+//! - `broad`: what real faces do besides posing one expression (see [`Family::Broad`]).
 
 /// Where each sample's solve starts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -31,6 +35,48 @@ impl SolveStart {
     }
 }
 
+/// How a sample's activations are drawn (`dataset.family`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// Zeng et al.'s `w_e * s` plus the jaw.
+    Paper,
+    /// Each sample of expression slot `e` is one of six kinds, drawn with these chances:
+    /// - 20% `w_e * s` as in `Paper`;
+    /// - 25% a blend: `e` and one or two other expressions, each with its own scale
+    ///   ~ U[0, 1], summed and clamped to [0, 1] (surprise with fear, a smile with a frown);
+    /// - 15% one AU's muscle group alone (any of the 17, from `au_muscles.csv`) at
+    ///   ~ U[0, 1], with the jaw ~ U[0, 0.2] unless the AU is the jaw's;
+    /// - 15% left/right asymmetry: `w_e * s` with one side's muscles scaled by ~ U[0, 1];
+    /// - 15% speech: `w_e * s` with s ~ U[0, 0.5], the jaw ~ U[0, 0.7], and each lip muscle
+    ///   (orbicularis oris, incisivi, depressor labii inferioris, mentalis, risorius,
+    ///   depressor anguli oris) with chance 1/2 at ~ U[0, 0.5];
+    /// - 10% sparse random: one to four muscle pairs at ~ U[0, 1], each side scaled by
+    ///   ~ U[0.5, 1], the jaw ~ U[0, 1] with chance 1/2.
+    ///
+    /// `Sample::scale` is the slot expression's scale (the AU group's or the strongest
+    /// muscle's level where `e` takes no part).
+    Broad,
+}
+
+impl Family {
+    pub const NAMES: [&'static str; 2] = ["paper", "broad"];
+
+    pub fn parse(s: &str) -> Option<Family> {
+        match s {
+            "paper" => Some(Family::Paper),
+            "broad" => Some(Family::Broad),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Paper => "paper",
+            Family::Broad => "broad",
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DatasetParams {
     /// Pairs per expression. Default 1000 (paper 4.2).
@@ -45,6 +91,8 @@ pub struct DatasetParams {
     /// (`TissueParams::shear_modulus_fraction`). Default 1.
     pub shear_modulus_fraction: f64,
     pub start: SolveStart,
+    /// How each sample's activations are drawn. Default `Paper`.
+    pub family: Family,
     /// Seed of the samples' streams; separate from the training seeds so that every seed
     /// trains on the same, once-simulated pairs. Default 1.
     pub seed: u64,
@@ -60,6 +108,7 @@ impl Default for DatasetParams {
             shear_modulus_fraction: crate::sim::tissue::TissueParams::default()
                 .shear_modulus_fraction,
             start: SolveStart::Predicted,
+            family: Family::Paper,
             seed: 1,
         }
     }
@@ -70,11 +119,16 @@ use rayon::prelude::*;
 
 use crate::observe::{landmarks, Observer, ObserverNoise, AU_COUNT, AU_NAMES};
 use crate::rng::stream;
+use crate::rng::Stream;
 use crate::sim::basis::LinearBasis;
-use crate::sim::controls::{control_names, CONTROL_COUNT};
+use crate::sim::controls::{
+    control_index, control_names, muscle_index, CONTROL_COUNT, JAW_ROTATION, JAW_SLIDE, JAW_TWIST,
+    MUSCLE_COUNT,
+};
 use crate::sim::expression::{Expression, ExpressionWeights};
+use crate::sim::muscles::{Side, MUSCLE_PAIRS};
 use crate::sim::solver::solve_predicted;
-use crate::sim::{solve_from_rest, FaceModel, SolveParams, Workspace};
+use crate::sim::{solve_from_rest, Activations, FaceModel, SolveParams, Workspace};
 
 /// One training pair.
 #[derive(Clone, Debug, PartialEq)]
@@ -90,13 +144,15 @@ pub struct Sample {
 
 /// Generates `params.pairs_per_expression` pairs per expression. Each sample draws from its
 /// own stream (`dataset/<expression>/<index>`), so the result does not depend on how rayon
-/// splits the work.
+/// splits the work. `au_controls` (per AU, the controls of its muscle group, as
+/// `FacsMaps::au_controls`) serves the broad family's single-AU samples.
 #[allow(clippy::too_many_arguments)]
 pub fn generate(
     model: &FaceModel,
     weights: &ExpressionWeights,
     observer: &Observer,
     basis: Option<&LinearBasis>,
+    au_controls: &[Vec<usize>],
     params: &DatasetParams,
     noise: &ObserverNoise,
     seed: u64,
@@ -116,9 +172,15 @@ pub fn generate(
             || Workspace::new(model),
             |ws, &(e, index)| -> Result<Sample> {
                 let mut rng = stream(seed, &format!("dataset/{e}/{index}"));
-                let scale = rng.uniform();
-                let jaw = rng.uniform();
-                let a = weights.sample(e, scale, jaw);
+                let (scale, a) = match params.family {
+                    Family::Paper => {
+                        let scale = rng.uniform();
+                        let jaw = rng.uniform();
+                        (scale, weights.sample(e, scale, jaw))
+                    }
+                    Family::Broad => broad_sample(weights, au_controls, e, &mut rng),
+                };
+                let jaw = a.get(JAW_ROTATION);
                 let state = match (params.start, basis) {
                     (SolveStart::Predicted, Some(b)) => solve_predicted(model, b, &a, ws, &solve),
                     _ => solve_from_rest(model, &a, ws, &solve),
@@ -144,6 +206,119 @@ pub fn generate(
             },
         )
         .collect()
+}
+
+/// The lip muscles speech moves (the broad family's speech-like samples).
+const SPEECH_MUSCLES: [&str; 8] = [
+    "orbicularis_oris_upper",
+    "orbicularis_oris_lower",
+    "incisivus_labii_superioris",
+    "incisivus_labii_inferioris",
+    "depressor_labii_inferioris",
+    "mentalis",
+    "risorius",
+    "depressor_anguli_oris",
+];
+
+/// One sample of the broad family for expression slot `e` (see [`Family::Broad`]): its
+/// scale and activations.
+pub fn broad_sample(
+    weights: &ExpressionWeights,
+    au_controls: &[Vec<usize>],
+    e: Expression,
+    rng: &mut Stream,
+) -> (f64, Activations) {
+    let mut v = [0.0; CONTROL_COUNT];
+    let add = |v: &mut [f64; CONTROL_COUNT], ex: Expression, s: f64| {
+        for (x, w) in v.iter_mut().zip(weights.weights(ex)) {
+            *x += w * s;
+        }
+    };
+    let kind = rng.uniform();
+    let scale;
+    if kind < 0.20 {
+        // Zeng et al.'s own samples.
+        scale = rng.uniform();
+        add(&mut v, e, scale);
+        v[JAW_ROTATION] = rng.uniform();
+    } else if kind < 0.45 {
+        // A blend of `e` with one or two other expressions, each at its own scale.
+        scale = rng.uniform();
+        add(&mut v, e, scale);
+        let mut others: Vec<Expression> = Expression::ALL
+            .iter()
+            .copied()
+            .filter(|&x| x != e)
+            .collect();
+        for _ in 0..1 + rng.index(2) {
+            let other = others.remove(rng.index(others.len()));
+            add(&mut v, other, rng.uniform());
+        }
+        v[JAW_ROTATION] = rng.uniform();
+    } else if kind < 0.60 {
+        // One AU's muscle group alone.
+        let au = rng.index(au_controls.len());
+        scale = rng.uniform();
+        for &c in &au_controls[au] {
+            v[c] = scale;
+        }
+        if !au_controls[au].contains(&JAW_ROTATION) {
+            v[JAW_ROTATION] = rng.range(0.0, 0.2);
+        }
+    } else if kind < 0.75 {
+        // Left/right asymmetry: one side weaker.
+        scale = rng.uniform();
+        add(&mut v, e, scale);
+        let weak = if rng.uniform() < 0.5 {
+            Side::Left
+        } else {
+            Side::Right
+        };
+        let factor = rng.uniform();
+        for pair in 0..MUSCLE_PAIRS.len() {
+            v[muscle_index(pair, weak)] *= factor;
+        }
+        v[JAW_ROTATION] = rng.uniform();
+    } else if kind < 0.90 {
+        // Speech: a faint expression, the jaw and the lips moving.
+        scale = rng.range(0.0, 0.5);
+        add(&mut v, e, scale);
+        v[JAW_ROTATION] = rng.range(0.0, 0.7);
+        for name in SPEECH_MUSCLES {
+            if rng.uniform() < 0.5 {
+                let level = rng.range(0.0, 0.5);
+                for side in ["left", "right"] {
+                    let c = control_index(&format!("{name}_{side}")).expect("a model muscle");
+                    v[c] += level;
+                }
+            }
+        }
+    } else {
+        // Sparse random activations.
+        let mut top: f64 = 0.0;
+        for _ in 0..1 + rng.index(4) {
+            let pair = rng.index(MUSCLE_PAIRS.len());
+            let level = rng.uniform();
+            for side in [Side::Left, Side::Right] {
+                let x = level * rng.range(0.5, 1.0);
+                v[muscle_index(pair, side)] = x;
+                top = top.max(x);
+            }
+        }
+        scale = top;
+        if rng.uniform() < 0.5 {
+            v[JAW_ROTATION] = rng.uniform();
+        }
+    }
+    for x in &mut v[..MUSCLE_COUNT + 1] {
+        *x = x.clamp(0.0, 1.0);
+    }
+    v[JAW_SLIDE] = 0.5;
+    v[JAW_TWIST] = 0.5;
+    (
+        scale,
+        Activations::from_values(&v).expect("clamped to [0, 1]"),
+    )
 }
 
 /// `expression,index,scale,AU01..AU45,<56 control names>`; numbers in Rust's shortest
@@ -206,4 +381,68 @@ pub fn from_csv(text: &str, name: &str) -> Result<Vec<Sample>> {
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::expressions::{default_expressions_path, read_expressions};
+    use crate::io::facs::{data_path, read_facs, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
+
+    fn draws(e: Expression, n: usize) -> Vec<(f64, Activations)> {
+        let weights = read_expressions(&default_expressions_path()).unwrap();
+        let facs = read_facs(
+            &data_path(DEFAULT_EXPRESSION_AUS),
+            &data_path(DEFAULT_AU_MUSCLES),
+        )
+        .unwrap();
+        (0..n)
+            .map(|i| {
+                let mut rng = stream(7, &format!("dataset/{e}/{i}"));
+                broad_sample(&weights, &facs.au_controls, e, &mut rng)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn broad_samples_are_valid_reproducible_and_go_beyond_the_paper_family() {
+        let weights = read_expressions(&default_expressions_path()).unwrap();
+        let e = Expression::Joy;
+        let a = draws(e, 400);
+        assert_eq!(a, draws(e, 400), "the same streams give the same samples");
+        let w = weights.weights(e);
+        let (mut asymmetric, mut off_family, mut silent_slot) = (0, 0, 0);
+        for (scale, act) in &a {
+            let v = act.values();
+            assert!((0.0..=1.0).contains(scale));
+            assert!(v.iter().all(|x| (0.0..=1.0).contains(x)));
+            assert_eq!((v[JAW_SLIDE], v[JAW_TWIST]), (0.5, 0.5));
+            if (0..MUSCLE_PAIRS.len()).any(|p| {
+                (v[muscle_index(p, Side::Left)] - v[muscle_index(p, Side::Right)]).abs() > 0.05
+            }) {
+                asymmetric += 1;
+            }
+            // Not w_e * s for any s: some muscle outside joy's weights is active.
+            if (0..MUSCLE_COUNT).any(|c| w[c] == 0.0 && v[c] > 0.01) {
+                off_family += 1;
+            }
+            if (0..MUSCLE_COUNT).all(|c| w[c] == 0.0 || v[c] < 1e-12) {
+                silent_slot += 1;
+            }
+        }
+        // Asymmetric and sparse kinds: about 25%; blends, speech, single AUs and sparse
+        // activations leave the family: about 65%.
+        assert!(
+            (60..=140).contains(&asymmetric),
+            "{asymmetric} asymmetric of 400"
+        );
+        assert!(
+            (200..=320).contains(&off_family),
+            "{off_family} off the family of 400"
+        );
+        assert!(
+            silent_slot > 20,
+            "single AUs and sparse draws without joy: {silent_slot}"
+        );
+    }
 }

@@ -8,6 +8,7 @@ pub mod headpose;
 pub mod inversion;
 pub mod observe;
 pub mod reach;
+pub mod realfaces;
 pub mod run;
 pub mod table1;
 pub mod table2;

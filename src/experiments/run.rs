@@ -25,17 +25,18 @@ use super::face::FaceSource;
 use super::headpose;
 use super::inversion;
 use super::observe::model_observer;
+use super::realfaces;
 use super::table1::{self, Network, Row};
 use super::table2;
 use super::table2_stage::{self, Table2Result};
 use crate::cache::{self, Cache, Entry};
 use crate::io::atomic::write_atomic;
-use crate::io::calibration::{default_calibration_path, read_calibration};
 use crate::io::expressions::default_expressions_path;
 use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
 use crate::io::mesh::default_mesh_path;
+use crate::io::observer_fit::read_any_calibration;
 use crate::learn::{self, Curves, Mlp};
-use crate::observe::AU_NAMES;
+use crate::observe::{Calibration, AU_NAMES};
 use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::geom::V3;
@@ -94,25 +95,38 @@ fn file_hash(path: &Path) -> Result<String> {
 /// The inputs every stage shares: assets and data files, by content.
 struct Assets {
     face: String,
-    data: String,
+    expressions: String,
     facs: FacsMaps,
     facs_hash: String,
 }
 
+impl Assets {
+    /// The expression weights' and the spec's observer calibration's hashes.
+    fn data(&self, spec: &Spec) -> Result<String> {
+        Ok(format!(
+            "{}{}",
+            self.expressions,
+            file_hash(&data_path(&spec.calibration))?
+        ))
+    }
+}
+
+/// The spec's observer calibration (`observer.calibration`: gains or a fitted readout).
+pub(super) fn spec_calibration(spec: &Spec) -> Result<Calibration> {
+    read_any_calibration(&data_path(&spec.calibration))
+        .with_context(|| format!("observer.calibration = \"{}\"", spec.calibration))
+}
+
 fn assets() -> Result<Assets> {
     let face = file_hash(&default_mesh_path())?;
-    let data = format!(
-        "{}{}",
-        file_hash(&default_expressions_path())?,
-        file_hash(&default_calibration_path())?
-    );
+    let expressions = file_hash(&default_expressions_path())?;
     let ea = data_path(DEFAULT_EXPRESSION_AUS);
     let am = data_path(DEFAULT_AU_MUSCLES);
     let facs = read_facs(&ea, &am)?;
     let facs_hash = format!("{}{}", file_hash(&ea)?, file_hash(&am)?);
     Ok(Assets {
         face,
-        data,
+        expressions,
         facs,
         facs_hash,
     })
@@ -126,7 +140,7 @@ struct Keys {
     train: Vec<((u64, Network), String)>,
 }
 
-fn keys(spec: &Spec, a: &Assets) -> Keys {
+fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
     let face = format!("face={}\n", a.face);
     let needs_basis =
         spec.dataset.start == SolveStart::Predicted || spec.tables.iter().any(|t| t == "inversion");
@@ -140,7 +154,7 @@ fn keys(spec: &Spec, a: &Assets) -> Keys {
     });
     let dv = format!(
         "{face}data={}\n{}",
-        a.data,
+        a.data(spec)?,
         values_text(spec, &["dataset.", "observer."])
     );
     let dataset = cache::key(
@@ -165,11 +179,11 @@ fn keys(spec: &Spec, a: &Assets) -> Keys {
             ));
         }
     }
-    Keys {
+    Ok(Keys {
         basis,
         dataset,
         train,
-    }
+    })
 }
 
 fn bar(len: u64, message: &str) -> ProgressBar {
@@ -262,6 +276,7 @@ struct CellResult {
     rows: Vec<Row>,
     table2: Option<Table2Result>,
     inversion: Option<inversion::Output>,
+    realfaces: Option<Vec<realfaces::FileRow>>,
     /// The first seed's unified network (safetensors) and the training AUs' per-AU
     /// statistics, for `facelab transfer --model`.
     unified: Vec<u8>,
@@ -321,7 +336,7 @@ fn run_cell(
     records: &mut Vec<StageRecord>,
 ) -> Result<CellResult> {
     let spec = &cell.spec;
-    let k = keys(spec, a);
+    let k = keys(spec, a)?;
     let mut record = recorder(&cell.name, records);
     let source = FaceSource::of_spec(spec);
 
@@ -337,8 +352,7 @@ fn run_cell(
         None => {
             let model = source.model()?;
             let weights = source.weights()?;
-            let calibration = read_calibration(&default_calibration_path())?.calibration();
-            let observer = model_observer(&model, calibration)?;
+            let observer = model_observer(&model, spec_calibration(spec)?)?;
             let basis = load_basis(&k, cache, &model, spec, &mut record)?;
             let total = spec.dataset.pairs_per_expression * 6;
             let progress = bar(total as u64, "dataset");
@@ -348,6 +362,7 @@ fn run_cell(
                 &weights,
                 &observer,
                 basis.as_ref(),
+                &a.facs.au_controls,
                 &spec.dataset,
                 &spec.observer,
                 spec.dataset.seed,
@@ -414,7 +429,7 @@ fn run_cell(
     progress.finish_and_clear();
 
     let wants_table2 = spec.tables.iter().any(|t| t == "table2");
-    let calibration = read_calibration(&default_calibration_path())?.calibration();
+    let calibration = spec_calibration(spec)?;
     let mut inversion_out = None;
     let table2 = if wants_table2 {
         let model = source.model()?;
@@ -428,7 +443,7 @@ fn run_cell(
         let inputs = table2_stage::Inputs {
             spec,
             source: &source,
-            assets: format!("face={}\ndata={}\n", a.face, a.data),
+            assets: format!("face={}\ndata={}\n", a.face, a.data(spec)?),
             dataset_key: &k.dataset,
             basis_key: k.basis.as_deref(),
             unified,
@@ -470,6 +485,32 @@ fn run_cell(
     } else {
         None
     };
+    let realfaces_rows = if spec.tables.iter().any(|t| t == "realfaces") {
+        let files = realfaces::inputs(&spec.realfaces)?;
+        let model = source.model()?;
+        let basis = load_basis(&k, cache, &model, spec, &mut record)?;
+        let observer = model_observer(&model, calibration.clone())?;
+        let training: Vec<_> = samples.iter().map(|s| s.aus).collect();
+        let inputs = realfaces::Inputs {
+            spec,
+            files: &files,
+            dataset_key: &k.dataset,
+            basis_key: k.basis.as_deref(),
+            unified: k
+                .train
+                .iter()
+                .filter(|((_, n), _)| *n == Network::Unified)
+                .map(|((seed, n), key)| (*seed, key.clone(), &nets[&(*seed, *n)]))
+                .collect(),
+            training_aus: &training,
+            model: &model,
+            basis: basis.as_ref(),
+            observer: &observer,
+        };
+        Some(realfaces::run(&inputs, cache, &mut record, &bar)?)
+    } else {
+        None
+    };
     let unified = nets[&(spec.seeds[0], Network::Unified)].to_safetensors()?;
     let mut rows = Vec::new();
     for &seed in &spec.seeds {
@@ -486,6 +527,7 @@ fn run_cell(
         rows,
         table2,
         inversion: inversion_out,
+        realfaces: realfaces_rows,
         unified,
         training_aus: training_aus_csv(&samples),
         curves,
@@ -832,6 +874,13 @@ fn headpose_outputs(
 /// Runs every cell of a spec file.
 pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     let cells = spec::load(spec_path, &opts.sets)?;
+    // The real files are outside the repository: say what is missing before computing.
+    for cell in &cells {
+        if cell.spec.tables.iter().any(|t| t == "realfaces") {
+            realfaces::inputs(&cell.spec.realfaces)
+                .with_context(|| format!("{}", spec_path.display()))?;
+        }
+    }
     let a = assets()?;
     let cache = Cache::new(&opts.results.join(".cache"));
     cache.remove_stale();
@@ -861,6 +910,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         };
     let mut sweep_rows: Vec<(String, Vec<Row>)> = Vec::new();
     let mut sweep_table2: Vec<(String, Vec<table2::Row>)> = Vec::new();
+    let mut sweep_realfaces: Vec<(String, Vec<realfaces::FileRow>)> = Vec::new();
     for cell in &cells {
         let prefix = if cells.len() > 1 {
             format!("{}/", sanitize(&cell.name))
@@ -904,16 +954,20 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             &mut outputs,
         )?;
         if cells.len() == 1 {
-            let report = &cell.spec.report_prefix;
-            let tables = out_root.join("paper-tables");
-            let md = table1_markdown(&result.rows, &cell.spec, result.samples);
-            write_atomic(&tables.join(format!("{report}table1.md")), md.as_bytes())?;
-            write_atomic(
-                &tables.join(format!("{report}table1.tex")),
-                table1_tex(&result.rows).as_bytes(),
-            )?;
-            let figures = out_root.join("figures").join(format!("{report}table1"));
-            table1_figures(&figures, &result)?;
+            // A spec that trains only for its own table (e.g. the real-data table) keeps its
+            // Table 1 in the run folder.
+            if cell.spec.tables.iter().any(|t| t == "table1") {
+                let report = &cell.spec.report_prefix;
+                let tables = out_root.join("paper-tables");
+                let md = table1_markdown(&result.rows, &cell.spec, result.samples);
+                write_atomic(&tables.join(format!("{report}table1.md")), md.as_bytes())?;
+                write_atomic(
+                    &tables.join(format!("{report}table1.tex")),
+                    table1_tex(&result.rows).as_bytes(),
+                )?;
+                let figures = out_root.join("figures").join(format!("{report}table1"));
+                table1_figures(&figures, &result)?;
+            }
             write(
                 "unified.safetensors".into(),
                 result.unified.clone(),
@@ -979,6 +1033,24 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 table2_stage::bars(&figures.join("au_mse_bars.png"), &t2.rows)?;
             }
         }
+        if let Some(rf) = &result.realfaces {
+            write(
+                format!("{prefix}realfaces.csv"),
+                realfaces::csv(rf).into_bytes(),
+                &mut outputs,
+            )?;
+            if cells.len() == 1 {
+                write_atomic(
+                    &out_root
+                        .join("paper-tables")
+                        .join(format!("{}realfaces.md", cell.spec.report_prefix)),
+                    realfaces::markdown(rf, &cell.spec).as_bytes(),
+                )?;
+            }
+        }
+        if let Some(rf) = result.realfaces {
+            sweep_realfaces.push((cell.name.clone(), rf));
+        }
         if let Some(t2) = result.table2 {
             sweep_table2.push((cell.name.clone(), t2.rows));
         }
@@ -988,6 +1060,9 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         let mut md = sweep_markdown(&experiment, &sweep_rows);
         if !sweep_table2.is_empty() {
             md.push_str(&table2_stage::sweep_markdown(&sweep_table2));
+        }
+        if !sweep_realfaces.is_empty() {
+            md.push_str(&realfaces::sweep_markdown(&sweep_realfaces));
         }
         write(
             format!("{experiment}.csv"),
@@ -1173,7 +1248,7 @@ pub fn status(
     let cache = Cache::new(&results.join(".cache"));
     let mut out = Vec::new();
     for cell in &cells {
-        let k = keys(&cell.spec, &a);
+        let k = keys(&cell.spec, &a)?;
         let label = |s: &str| {
             if cell.name.is_empty() {
                 s.to_string()

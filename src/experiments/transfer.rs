@@ -16,7 +16,6 @@ use super::headpose::{face_motion, posed_face, Learned};
 use super::observe::model_observer;
 use super::table2::{au_mse, predict_activations, solve_clip};
 use crate::io::atomic::write_atomic;
-use crate::io::calibration::{default_calibration_path, read_calibration};
 use crate::io::openface::{read_openface, write_openface, FaceRow};
 use crate::learn::{Mlp, Normalization, Normalizer};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
@@ -160,10 +159,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
 
     let source = FaceSource::of_spec(&spec);
     let model = source.model()?;
-    let observer = model_observer(
-        &model,
-        read_calibration(&default_calibration_path())?.calibration(),
-    )?;
+    let observer = model_observer(&model, super::run::spec_calibration(&spec)?)?;
     let params = SolveParams {
         tolerance: spec.dataset.tolerance,
         ..SolveParams::default()

@@ -8,15 +8,17 @@ use std::path::Path;
 use super::raw::{set_path, Node, Origin, Value};
 use super::SpecError;
 use crate::cohort::{ClipParams, CohortKind, CohortParams, SubjectParams};
-use crate::experiments::dataset::{DatasetParams, SolveStart};
+use crate::experiments::dataset::{DatasetParams, Family, SolveStart};
 use crate::experiments::headpose::HeadposeParams;
 use crate::experiments::inversion::InversionParams;
+use crate::experiments::realfaces::RealfacesParams;
+use crate::io::calibration::DEFAULT_CALIBRATION;
 use crate::learn::params::{ModelParams, Normalization, TrainParams};
 use crate::observe::ObserverNoise;
 use crate::sim::controls::edit_distance;
 
 /// The tables a spec can ask for.
-pub const TABLES: [&str; 4] = ["table1", "table2", "inversion", "headpose"];
+pub const TABLES: [&str; 5] = ["table1", "table2", "inversion", "headpose", "realfaces"];
 
 /// Everything a run needs, validated.
 #[derive(Clone, Debug, PartialEq)]
@@ -30,6 +32,10 @@ pub struct Spec {
     pub tables: Vec<String>,
     pub dataset: DatasetParams,
     pub observer: ObserverNoise,
+    /// The observer's calibration (`observer.calibration`): the gains table
+    /// `experiments/au_calibration.csv` (default) or a readout fitted to OpenFace
+    /// (`experiments/au_observer_fit.csv`), relative to the repository.
+    pub calibration: String,
     pub model: ModelParams,
     pub train: TrainParams,
     /// The reference cohorts (`[cohort]`), used when `tables` has "table2".
@@ -41,6 +47,8 @@ pub struct Spec {
     pub inversion: InversionParams,
     /// The head-neck experiment (`[headpose]`), used when `tables` has "headpose".
     pub headpose: HeadposeParams,
+    /// The real-data table (`[realfaces]`), used when `tables` has "realfaces".
+    pub realfaces: RealfacesParams,
     /// Prefix of the paper-table and figure names (`report.prefix`), so a smoke or test run
     /// does not overwrite the committed `paper-tables/table1.md`. Default "".
     pub report_prefix: String,
@@ -138,6 +146,43 @@ impl<'a> Reader<'a> {
             },
         };
         self.values.insert(key.into(), toml::Value::Integer(value));
+        Ok(value)
+    }
+
+    /// Keys added after runs were committed are recorded in `values` (and so in cache keys
+    /// and a run's `spec.toml`) only when a spec sets them, so that those runs' keys and
+    /// outputs stay valid.
+    fn forget_if_unset(&mut self, key: &str) {
+        if lookup(self.tree, key).is_none() {
+            self.values.remove(key);
+        }
+    }
+
+    /// A data file's path, relative to the repository (as `experiments/au_calibration.csv`);
+    /// it must exist.
+    fn data_file(&mut self, key: &str, default: &str) -> Result<String, SpecError> {
+        let value = match self.get(key) {
+            None => default.to_string(),
+            Some(node) => match &node.value {
+                Value::String(s) if crate::io::data_path(s).is_file() => s.clone(),
+                Value::String(s) => {
+                    return Err(self.invalid(
+                        node,
+                        key,
+                        format!("= \"{s}\": no such file (paths are relative to the repository)"),
+                    ))
+                }
+                other => {
+                    return Err(self.invalid(
+                        node,
+                        key,
+                        format!("must be a string, not {}", other.type_name()),
+                    ))
+                }
+            },
+        };
+        self.values
+            .insert(key.into(), toml::Value::String(value.clone()));
         Ok(value)
     }
 
@@ -399,12 +444,17 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         )?,
         start: SolveStart::parse(&r.choice("dataset.start", d.start.name(), &SolveStart::NAMES)?)
             .expect("choice checked"),
+        family: Family::parse(&r.choice("dataset.family", d.family.name(), &Family::NAMES)?)
+            .expect("choice checked"),
         seed: r.integer("dataset.seed", d.seed as i64, 0, i64::MAX)? as u64,
     };
+    r.forget_if_unset("dataset.family");
     let observer = ObserverNoise {
         noise_sd: r.float("observer.noise_sd", 0.0, &nonneg)?,
         gain_spread: r.float("observer.gain_spread", 0.0, &nonneg)?,
     };
+    let calibration = r.data_file("observer.calibration", DEFAULT_CALIBRATION)?;
+    r.forget_if_unset("observer.calibration");
     let m = ModelParams::default();
     let model = ModelParams {
         layers: r.integer("model.layers", m.layers as i64, 1, 16)? as usize,
@@ -443,6 +493,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         refinements: r.integer("inversion.refinements", iv.refinements as i64, 0, 20)? as usize,
     };
     let headpose = read_headpose(&mut r)?;
+    let realfaces = read_realfaces(&mut r, &tables)?;
     let cohort = read_cohort(&mut r)?;
     let table2_normalization =
         Normalization::parse(&r.choice("table2.normalization", "minmax", &["minmax", "zscore"])?)
@@ -477,13 +528,55 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         tables,
         dataset,
         observer,
+        calibration,
         model,
         train,
         cohort,
         table2_normalization,
         inversion,
         headpose,
+        realfaces,
         values,
+    })
+}
+
+/// `[realfaces]`: read (and recorded) only when `tables` lists "realfaces", so other specs'
+/// values stay as they were.
+fn read_realfaces(r: &mut Reader, tables: &[String]) -> Result<RealfacesParams, SpecError> {
+    let d = RealfacesParams::default();
+    let files = r.data_file("realfaces.files", &d.files)?;
+    let data = match r.get("realfaces.data") {
+        None => None,
+        Some(node) => match &node.value {
+            Value::String(s) => {
+                r.values
+                    .insert("realfaces.data".into(), toml::Value::String(s.clone()));
+                Some(s.clone())
+            }
+            other => {
+                return Err(r.invalid(
+                    node,
+                    "realfaces.data",
+                    format!("must be a string (a folder), not {}", other.type_name()),
+                ))
+            }
+        },
+    };
+    let frame_stride =
+        r.integer("realfaces.frame_stride", d.frame_stride as i64, 1, 100_000)? as usize;
+    if !tables.iter().any(|t| t == "realfaces") {
+        for key in [
+            "realfaces.files",
+            "realfaces.data",
+            "realfaces.frame_stride",
+        ] {
+            r.forget_if_unset(key);
+        }
+    }
+    Ok(RealfacesParams {
+        files,
+        data,
+        frame_stride,
     })
 }
 

@@ -1,0 +1,542 @@
+//! The real-data table (`tables = ["realfaces"]`, DESIGN 2.4): real OpenFace files transferred
+//! through a run's unified network onto the model, unnormalized and normalized, and scored as
+//! Table 2 scores the cohorts: per-AU MSE on the 0-1 scale between OpenFace's AUs in the file
+//! and the spec's observer's reading of the transferred face. With the readout fitted to
+//! OpenFace (`observer.calibration = "experiments/au_observer_fit.csv"`) both sides are on
+//! OpenFace's scale.
+//!
+//! The files are those of a list (`realfaces.files`, default `experiments/realdata.csv`: file,
+//! person, licence) under a data folder (`realfaces.data`, default `../shared/realdata`),
+//! which the project does not commit. Stage key (`realfaces`, per seed): the content of every
+//! listed file, `realfaces.frame_stride`, `table2.normalization`, and the keys of the seed's
+//! unified network, the dataset (its AU range) and the basis.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+
+use super::table2::{range_map, training_range, transfer, Setting};
+use crate::cache::{self, Cache};
+use crate::io::observer_fit::read_realdata;
+use crate::io::openface::read_openface;
+use crate::learn::Mlp;
+use crate::observe::{Observer, AU_COUNT, AU_NAMES};
+use crate::sim::basis::LinearBasis;
+use crate::sim::{FaceModel, SolveParams};
+use crate::spec::Spec;
+
+// 1: first version.
+const REALFACES_VERSION: u32 = 1;
+
+/// AU12 at or above this in the file marks a real smile (the issue's smile check).
+pub const SMILE_AU12: f64 = 2.5;
+/// AU01 and AU02 both at or above this mark a real brow raise.
+pub const BROW_RAISE: f64 = 2.0;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct RealfacesParams {
+    /// The list of files (`file,person,licence`), relative to the repository.
+    pub files: String,
+    /// The folder the listed paths are relative to; `None`: `../shared/realdata`.
+    pub data: Option<String>,
+    /// Every n-th used frame of each file is transferred (1: all).
+    pub frame_stride: usize,
+}
+
+impl Default for RealfacesParams {
+    fn default() -> Self {
+        RealfacesParams {
+            files: "experiments/realdata.csv".into(),
+            data: None,
+            frame_stride: 1,
+        }
+    }
+}
+
+/// One listed file, found on disk.
+#[derive(Clone, Debug)]
+pub struct RealInput {
+    /// As listed (relative to the data folder).
+    pub file: String,
+    pub person: String,
+    pub path: PathBuf,
+}
+
+/// The data folder of a spec's real files.
+pub fn data_root(p: &RealfacesParams) -> PathBuf {
+    match &p.data {
+        Some(d) => PathBuf::from(d),
+        None => super::observe::default_realdata_root(),
+    }
+}
+
+/// The listed files, each checked to exist; the error says what is missing and how to give it.
+pub fn inputs(p: &RealfacesParams) -> Result<Vec<RealInput>> {
+    let list = crate::io::data_path(&p.files);
+    let root = data_root(p);
+    let listed = read_realdata(&list)?;
+    let mut out = Vec::with_capacity(listed.len());
+    let mut missing = Vec::new();
+    for f in listed {
+        let path = root.join(&f.file);
+        if !path.is_file() {
+            missing.push(f.file.display().to_string());
+        }
+        out.push(RealInput {
+            file: f.file.display().to_string(),
+            person: f.person,
+            path,
+        });
+    }
+    if !missing.is_empty() {
+        bail!(
+            "the real-data table needs the OpenFace files listed in {} under {}, which is not \
+             here or lacks {} of them ({}). They are not part of the repository (their \
+             licences do not let it carry them): point `realfaces.data` at the folder that \
+             holds them, e.g. `--set realfaces.data=\"/path/to/realdata\"`",
+            list.display(),
+            root.display(),
+            missing.len(),
+            missing.join(", ")
+        );
+    }
+    Ok(out)
+}
+
+/// One file in one setting, for one seed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FileRow {
+    pub seed: u64,
+    pub file: String,
+    pub person: String,
+    pub setting: Setting,
+    /// Frames transferred.
+    pub frames: usize,
+    /// Rows with `success = 0`, skipped.
+    pub skipped: usize,
+    pub mse: [f64; AU_COUNT],
+    /// Frames with AU12 >= `SMILE_AU12` in the file, and the mean |AU12 in - AU12 out| over
+    /// them.
+    pub smile: (usize, f64),
+    /// Frames with AU01 and AU02 >= `BROW_RAISE`, and the mean |AU01 in - out| and
+    /// |AU02 in - out| over them.
+    pub brow: (usize, f64, f64),
+}
+
+impl FileRow {
+    pub fn mean(&self) -> f64 {
+        self.mse.iter().sum::<f64>() / AU_COUNT as f64
+    }
+}
+
+/// What the stage needs from the rest of the cell.
+pub struct Inputs<'a> {
+    pub spec: &'a Spec,
+    pub files: &'a [RealInput],
+    pub dataset_key: &'a str,
+    pub basis_key: Option<&'a str>,
+    /// Per seed: the unified network's train key and network.
+    pub unified: Vec<(u64, String, &'a Mlp)>,
+    pub training_aus: &'a [[f64; AU_COUNT]],
+    pub model: &'a FaceModel,
+    pub basis: Option<&'a LinearBasis>,
+    pub observer: &'a Observer,
+}
+
+type Record<'r> = &'r mut dyn FnMut(&str, &str, bool, Instant);
+
+/// A file's used frames (every `stride`-th row with success = 1) and its skipped count.
+fn frames_of(input: &RealInput, stride: usize) -> Result<(Vec<[f64; AU_COUNT]>, usize)> {
+    let file = read_openface(&input.path)?;
+    let rows: Vec<[f64; AU_COUNT]> = file.rows.iter().step_by(stride).map(|r| r.aus).collect();
+    if rows.is_empty() {
+        bail!(
+            "{}: no row with success = 1 ({} skipped)",
+            input.path.display(),
+            file.skipped
+        );
+    }
+    Ok((rows, file.skipped))
+}
+
+fn mean_abs(pairs: impl Iterator<Item = (f64, f64)>) -> (usize, f64) {
+    let (n, sum) = pairs.fold((0, 0.0), |(n, s), (a, b)| (n + 1, s + (a - b).abs()));
+    (n, if n > 0 { sum / n as f64 } else { f64::NAN })
+}
+
+/// Transfers every file in both settings for every seed (cached per seed).
+pub fn run(
+    inp: &Inputs,
+    cache: &Cache,
+    record: Record,
+    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
+) -> Result<Vec<FileRow>> {
+    let spec = inp.spec;
+    let stride = spec.realfaces.frame_stride;
+    let mut files = Vec::with_capacity(inp.files.len());
+    let mut content = String::new();
+    for f in inp.files {
+        let bytes =
+            std::fs::read(&f.path).with_context(|| format!("{}: cannot read", f.path.display()))?;
+        content.push_str(&format!("{}={}\n", f.file, cache::sha256(&bytes)));
+        files.push(frames_of(f, stride)?);
+    }
+    let kind = spec.table2_normalization;
+    let target = training_range(kind, inp.training_aus);
+    let maps: Vec<_> = files
+        .iter()
+        .map(|(rows, _)| range_map(kind, rows, &target))
+        .collect();
+    let params = SolveParams {
+        tolerance: spec.dataset.tolerance,
+        ..SolveParams::default()
+    };
+    let mut out = Vec::new();
+    for (seed, train_key, mlp) in &inp.unified {
+        let mut deps = vec![train_key.as_str(), inp.dataset_key];
+        deps.extend(inp.basis_key);
+        let key = cache::key(
+            "realfaces",
+            REALFACES_VERSION,
+            &format!(
+                "{content}realfaces.frame_stride = {stride}\ntable2.normalization = {}\n",
+                kind.name()
+            ),
+            &deps,
+        );
+        let t = Instant::now();
+        let text = match cache.get("realfaces", &key)? {
+            Some(e) => {
+                record("realfaces", &key, true, t);
+                String::from_utf8(e.read("realfaces.csv")?)?
+            }
+            None => {
+                // One clip per file and setting; clips run in parallel. The normalized clips
+                // carry each file's map already applied (in f32, as the network sees them).
+                let mut clips: Vec<Vec<[f64; AU_COUNT]>> = Vec::new();
+                for setting in Setting::ALL {
+                    for ((reference, _), map) in files.iter().zip(&maps) {
+                        clips.push(match setting {
+                            Setting::Unnormalized => reference.clone(),
+                            Setting::Normalized => {
+                                let flat: Vec<f32> =
+                                    reference.iter().flatten().map(|&v| v as f32).collect();
+                                map.apply(&flat)
+                                    .chunks_exact(AU_COUNT)
+                                    .map(|c| std::array::from_fn(|k| c[k] as f64))
+                                    .collect()
+                            }
+                        });
+                    }
+                }
+                let progress = bar(clips.len() as u64, "realfaces");
+                let tick = || progress.inc(1);
+                let transferred = transfer(
+                    inp.model,
+                    inp.basis,
+                    inp.observer,
+                    mlp,
+                    None,
+                    &clips,
+                    &params,
+                    &tick,
+                )
+                .with_context(|| format!("transferring the real files (seed {seed})"))?;
+                progress.finish_and_clear();
+                let mut rows = Vec::new();
+                for (ci, frames) in transferred.iter().enumerate() {
+                    let setting = Setting::ALL[ci / files.len()];
+                    let i = ci % files.len();
+                    let (reference, skipped) = &files[i];
+                    let got: Vec<[f64; AU_COUNT]> = frames.iter().map(|f| f.aus).collect();
+                    let raised: Vec<_> = reference
+                        .iter()
+                        .zip(&got)
+                        .filter(|(r, _)| r[AU01] >= BROW_RAISE && r[AU02] >= BROW_RAISE)
+                        .collect();
+                    rows.push(FileRow {
+                        seed: *seed,
+                        file: inp.files[i].file.clone(),
+                        person: inp.files[i].person.clone(),
+                        setting,
+                        frames: reference.len(),
+                        skipped: *skipped,
+                        mse: super::table2::au_mse(reference, &got),
+                        smile: mean_abs(
+                            reference
+                                .iter()
+                                .zip(&got)
+                                .filter(|(r, _)| r[AU12] >= SMILE_AU12)
+                                .map(|(r, g)| (r[AU12], g[AU12])),
+                        ),
+                        brow: {
+                            let (n, a) = mean_abs(raised.iter().map(|(r, g)| (r[AU01], g[AU01])));
+                            let (_, b) = mean_abs(raised.iter().map(|(r, g)| (r[AU02], g[AU02])));
+                            (n, a, b)
+                        },
+                    });
+                }
+                let text = csv(&rows);
+                cache.put(
+                    "realfaces",
+                    &key,
+                    &[("realfaces.csv".into(), text.clone().into_bytes())],
+                )?;
+                record("realfaces", &key, false, t);
+                text
+            }
+        };
+        out.extend(from_csv(&text, "realfaces.csv")?);
+    }
+    Ok(out)
+}
+
+const AU01: usize = 0;
+const AU02: usize = 1;
+const AU12: usize = 8;
+
+fn header() -> String {
+    let mut h = String::from("seed,file,person,setting,frames,skipped");
+    for a in AU_NAMES {
+        h.push(',');
+        h.push_str(a);
+    }
+    h.push_str(",mean,smile_frames,smile_au12_error,brow_frames,brow_au01_error,brow_au02_error\n");
+    h
+}
+
+/// The rows as CSV; numbers in Rust's shortest round-trip form, so reading gives the same bits.
+pub fn csv(rows: &[FileRow]) -> String {
+    let mut out = header();
+    for r in rows {
+        out.push_str(&format!(
+            "{},{},{},{},{},{}",
+            r.seed,
+            r.file,
+            r.person,
+            r.setting.name(),
+            r.frames,
+            r.skipped
+        ));
+        for v in &r.mse {
+            out.push_str(&format!(",{v}"));
+        }
+        out.push_str(&format!(
+            ",{},{},{},{},{},{}\n",
+            r.mean(),
+            r.smile.0,
+            r.smile.1,
+            r.brow.0,
+            r.brow.1,
+            r.brow.2
+        ));
+    }
+    out
+}
+
+pub fn from_csv(text: &str, name: &str) -> Result<Vec<FileRow>> {
+    let mut lines = text.lines();
+    if lines.next().map(|h| format!("{h}\n")) != Some(header()) {
+        bail!("{name}: not a realfaces table (header differs)");
+    }
+    let expected = 6 + AU_COUNT + 6;
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            let c: Vec<&str> = line.split(',').collect();
+            if c.len() != expected {
+                bail!("{name}:{}: {} cells, expected {expected}", i + 2, c.len());
+            }
+            let num = |k: usize| -> Result<f64> {
+                c[k].parse()
+                    .with_context(|| format!("{name}:{}: `{}` is not a number", i + 2, c[k]))
+            };
+            let int = |k: usize| -> Result<usize> {
+                c[k].parse()
+                    .with_context(|| format!("{name}:{}: `{}` is not a count", i + 2, c[k]))
+            };
+            let mut mse = [0.0; AU_COUNT];
+            for (k, m) in mse.iter_mut().enumerate() {
+                *m = num(6 + k)?;
+            }
+            let b = 6 + AU_COUNT + 1;
+            Ok(FileRow {
+                seed: c[0]
+                    .parse()
+                    .with_context(|| format!("{name}:{}: bad seed", i + 2))?,
+                file: c[1].to_string(),
+                person: c[2].to_string(),
+                setting: Setting::parse(c[3])
+                    .with_context(|| format!("{name}:{}: unknown setting `{}`", i + 2, c[3]))?,
+                frames: int(4)?,
+                skipped: int(5)?,
+                mse,
+                smile: (int(b)?, num(b + 1)?),
+                brow: (int(b + 2)?, num(b + 3)?, num(b + 4)?),
+            })
+        })
+        .collect()
+}
+
+fn f4(v: f64) -> String {
+    if v.is_nan() {
+        "-".into()
+    } else {
+        format!("{v:.4}")
+    }
+}
+
+fn f2(v: f64) -> String {
+    if v.is_nan() {
+        "-".into()
+    } else {
+        format!("{v:.2}")
+    }
+}
+
+/// Frame-weighted per-AU MSE of a set of rows.
+fn pooled(rows: &[&FileRow]) -> [f64; AU_COUNT] {
+    let n: usize = rows.iter().map(|r| r.frames).sum();
+    std::array::from_fn(|k| {
+        rows.iter().map(|r| r.mse[k] * r.frames as f64).sum::<f64>() / n.max(1) as f64
+    })
+}
+
+/// `paper-tables/realfaces.md`: per file and setting, and per AU pooled over the files.
+pub fn markdown(rows: &[FileRow], spec: &Spec) -> String {
+    let seeds: Vec<String> = spec.seeds.iter().map(u64::to_string).collect();
+    let first = spec.seeds[0];
+    let mut md = format!(
+        "# Real faces: transfer error on real OpenFace files\n\n\
+         Each file of `{}` (under `{}`; not in the repository) is transferred frame by frame \
+         through the unified network (dataset family `{}`, seed{} {}) onto the model, \
+         unnormalized and normalized ({} onto the training data's range, per file). The \
+         measure compares **OpenFace's AUs in the file** with **our observer's reading of the \
+         transferred face** (`{}`){}: per-AU MSE on the 0-1 scale (AU / 5). The network never \
+         saw these people; the observer's readout was fitted on them (its leave-one-person-out \
+         validation is in the README).{}\n\n",
+        spec.realfaces.files,
+        spec.realfaces
+            .data
+            .as_deref()
+            .unwrap_or("../shared/realdata"),
+        spec.dataset.family.name(),
+        if seeds.len() > 1 { "s" } else { "" },
+        seeds.join(", "),
+        spec.table2_normalization.name(),
+        spec.calibration,
+        if spec.calibration.ends_with("au_observer_fit.csv") {
+            ", both on OpenFace's scale after the fit"
+        } else {
+            ""
+        },
+        if spec.realfaces.frame_stride > 1 {
+            format!(
+                " Every {}th used frame of each file is transferred.",
+                spec.realfaces.frame_stride
+            )
+        } else {
+            String::new()
+        }
+    );
+    md.push_str(&format!(
+        "Targets: mean MSE <= 0.01 per file, every AU <= 0.03; a real smile (AU12 >= {SMILE_AU12} \
+         in the file) transfers to AU12 within 0.5.\n\n"
+    ));
+    md.push_str(&format!("## Per file (seed {first})\n\n"));
+    md.push_str(
+        "| file | person | setting | frames (skipped) | mean MSE | worst AU (MSE) | AUs > 0.03 \
+         | smile frames, AU12 abs. error | brow-raise frames, AU01 / AU02 abs. error |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows.iter().filter(|r| r.seed == first) {
+        let worst = (0..AU_COUNT)
+            .max_by(|&a, &b| r.mse[a].total_cmp(&r.mse[b]))
+            .expect("17 AUs");
+        md.push_str(&format!(
+            "| {} | {} | {} | {} ({}) | {} | {} ({}) | {} | {}, {} | {}, {} / {} |\n",
+            r.file,
+            r.person,
+            r.setting.name(),
+            r.frames,
+            r.skipped,
+            f4(r.mean()),
+            AU_NAMES[worst],
+            f4(r.mse[worst]),
+            r.mse.iter().filter(|&&m| m > 0.03).count(),
+            r.smile.0,
+            f2(r.smile.1),
+            r.brow.0,
+            f2(r.brow.1),
+            f2(r.brow.2),
+        ));
+    }
+    md.push_str(&format!(
+        "\n## Per AU, pooled over the files (frame-weighted, seed{} {})\n\n| setting | mean |",
+        if seeds.len() > 1 { "s" } else { "" },
+        seeds.join(", ")
+    ));
+    for a in AU_NAMES {
+        md.push_str(&format!(" {a} |"));
+    }
+    md.push_str("\n|---|---|");
+    md.push_str(&"---|".repeat(AU_COUNT));
+    md.push('\n');
+    for setting in Setting::ALL {
+        let of: Vec<&FileRow> = rows.iter().filter(|r| r.setting == setting).collect();
+        let p = pooled(&of);
+        md.push_str(&format!(
+            "| {} | {} |",
+            setting.name(),
+            f4(p.iter().sum::<f64>() / AU_COUNT as f64)
+        ));
+        for v in p {
+            md.push_str(&format!(" {} |", f4(v)));
+        }
+        md.push('\n');
+    }
+    md
+}
+
+/// A sweep's real-data comparison (e.g. the family ablation): per file and setting, each
+/// cell's mean MSE (first seed), then the pooled mean per cell.
+pub fn sweep_markdown(cells: &[(String, Vec<FileRow>)]) -> String {
+    let mut md =
+        String::from("\n## Real faces: mean AU MSE per file (first seed)\n\n| file | setting |");
+    for (name, _) in cells {
+        md.push_str(&format!(" {name} |"));
+    }
+    md.push_str("\n|---|---|");
+    md.push_str(&"---|".repeat(cells.len()));
+    md.push('\n');
+    let Some((_, first)) = cells.first() else {
+        return md;
+    };
+    let seed = first.first().map(|r| r.seed).unwrap_or(1);
+    for r in first.iter().filter(|r| r.seed == seed) {
+        md.push_str(&format!("| {} | {} |", r.file, r.setting.name()));
+        for (_, rows) in cells {
+            let v = rows
+                .iter()
+                .find(|x| x.seed == seed && x.file == r.file && x.setting == r.setting)
+                .map(FileRow::mean)
+                .unwrap_or(f64::NAN);
+            md.push_str(&format!(" {} |", f4(v)));
+        }
+        md.push('\n');
+    }
+    for setting in Setting::ALL {
+        md.push_str(&format!("| pooled | {} |", setting.name()));
+        for (_, rows) in cells {
+            let of: Vec<&FileRow> = rows.iter().filter(|r| r.setting == setting).collect();
+            let p = pooled(&of);
+            md.push_str(&format!(
+                " {} |",
+                f4(p.iter().sum::<f64>() / AU_COUNT as f64)
+            ));
+        }
+        md.push('\n');
+    }
+    md
+}
