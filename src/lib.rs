@@ -15,6 +15,7 @@ pub mod edit;
 pub mod experiments;
 pub mod invert;
 pub mod io;
+pub mod landmark;
 pub mod learn;
 pub mod observe;
 pub mod report;

@@ -4,6 +4,7 @@
 mod choe;
 mod cli;
 mod harness;
+mod landmarker;
 mod neck;
 mod observe;
 mod openface;

@@ -10,6 +10,7 @@ pub mod facs;
 pub mod mesh;
 pub mod observer_fit;
 pub mod openface;
+pub mod photo;
 pub mod reach;
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,390 @@
+//! A small interpreter for the two MediaPipe networks, in candle on the CPU.
+//!
+//! `tools/landmarker/convert_mediapipe.py` turns each TFLite file into a safetensors file:
+//! the constant tensors (fp16, laid out for NCHW) and, in the metadata, the operator list in
+//! execution order with TFLite's options. [`Graph`] runs exactly that list. Tensors of rank 4
+//! are NCHW here while the graph's shapes and axes are TFLite's NHWC; [`Graph::forward`] maps
+//! between the two where an operator needs it (padding, reshape, concatenation) and checks
+//! every operator's output shape against the one the file records.
+
+use std::collections::BTreeMap;
+
+use candle_core::{DType, Device, Tensor};
+use serde::Deserialize;
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum GraphError {
+    #[error("{name}: {source}")]
+    Candle {
+        name: String,
+        #[source]
+        source: candle_core::Error,
+    },
+    #[error("{name}: {message}")]
+    Format { name: String, message: String },
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(rename_all = "lowercase")]
+enum Activation {
+    None,
+    Relu,
+    Relu6,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(rename_all = "lowercase")]
+enum Padding {
+    Same,
+    Valid,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "op", rename_all = "snake_case")]
+enum Kind {
+    Conv2d {
+        stride: [usize; 2],
+        padding: Padding,
+        activation: Activation,
+    },
+    DepthwiseConv2d {
+        stride: [usize; 2],
+        padding: Padding,
+        activation: Activation,
+    },
+    MaxPool2d {
+        stride: [usize; 2],
+        filter: [usize; 2],
+        padding: Padding,
+        activation: Activation,
+    },
+    Add {
+        activation: Activation,
+    },
+    Concat {
+        axis: i64,
+        activation: Activation,
+    },
+    Pad {
+        paddings: Vec<[usize; 2]>,
+    },
+    Reshape,
+    Relu,
+    Prelu,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+struct Op {
+    inputs: Vec<String>,
+    output: String,
+    output_shape: Vec<usize>,
+    #[serde(flatten)]
+    kind: Kind,
+}
+
+/// One network: its constants and operators.
+pub struct Graph {
+    name: String,
+    ops: Vec<Op>,
+    constants: BTreeMap<String, Tensor>,
+    input: String,
+    /// NHWC, as TFLite gives it.
+    pub input_shape: [usize; 4],
+    outputs: Vec<String>,
+}
+
+impl Graph {
+    /// Reads a network from the bytes of a converted safetensors file; `name` is used in errors.
+    pub fn from_bytes(name: &str, bytes: &[u8]) -> Result<Graph, GraphError> {
+        let format = |message: String| GraphError::Format {
+            name: name.to_string(),
+            message,
+        };
+        let (_, header) = safetensors::SafeTensors::read_metadata(bytes)
+            .map_err(|e| format(format!("not a safetensors file: {e}")))?;
+        let meta = header
+            .metadata()
+            .clone()
+            .ok_or_else(|| format("no metadata (not made by convert_mediapipe.py)".into()))?;
+        let field = |key: &str| {
+            meta.get(key)
+                .cloned()
+                .ok_or_else(|| format(format!("metadata has no `{key}`")))
+        };
+        fn json<T: serde::de::DeserializeOwned>(key: &str, text: &str) -> Result<T, String> {
+            serde_json::from_str(text).map_err(|e| format!("metadata `{key}`: {e}"))
+        }
+        let ops: Vec<Op> = json("graph", &field("graph")?).map_err(format)?;
+        let shape: Vec<usize> = json("input_shape", &field("input_shape")?).map_err(format)?;
+        let input_shape: [usize; 4] = shape
+            .try_into()
+            .map_err(|_| format("input_shape is not NHWC".into()))?;
+        let outputs: Vec<String> = json("outputs", &field("outputs")?).map_err(format)?;
+        let candle = |source| GraphError::Candle {
+            name: name.to_string(),
+            source,
+        };
+        let mut constants = BTreeMap::new();
+        for (key, t) in
+            candle_core::safetensors::load_buffer(bytes, &Device::Cpu).map_err(candle)?
+        {
+            constants.insert(key, t.to_dtype(DType::F32).map_err(candle)?);
+        }
+        Ok(Graph {
+            name: name.to_string(),
+            ops,
+            constants,
+            input: field("input")?,
+            input_shape,
+            outputs,
+        })
+    }
+
+    /// Runs the network on an NCHW input; returns the graph's outputs in order, each in
+    /// TFLite's own shape (NHWC for rank 4).
+    pub fn forward(&self, input: &Tensor) -> Result<Vec<Tensor>, GraphError> {
+        let mut values: BTreeMap<&str, Tensor> = BTreeMap::new();
+        values.insert(&self.input, input.clone());
+        for op in &self.ops {
+            let out = self
+                .apply(op, &values)
+                .map_err(|source| GraphError::Candle {
+                    name: format!("{} operator `{}`", self.name, op.output),
+                    source,
+                })?;
+            let got = nhwc_dims(&out);
+            if got != op.output_shape {
+                return Err(GraphError::Format {
+                    name: self.name.clone(),
+                    message: format!(
+                        "operator `{}` gave shape {got:?}, the file says {:?}",
+                        op.output, op.output_shape
+                    ),
+                });
+            }
+            values.insert(&op.output, out);
+        }
+        self.outputs
+            .iter()
+            .map(|name| {
+                let t = values
+                    .get(name.as_str())
+                    .ok_or_else(|| GraphError::Format {
+                        name: self.name.clone(),
+                        message: format!("output `{name}` is never computed"),
+                    })?;
+                if t.rank() == 4 {
+                    t.permute((0, 2, 3, 1))
+                        .map_err(|source| GraphError::Candle {
+                            name: self.name.clone(),
+                            source,
+                        })
+                } else {
+                    Ok(t.clone())
+                }
+            })
+            .collect()
+    }
+
+    fn tensor<'a>(
+        &'a self,
+        values: &'a BTreeMap<&str, Tensor>,
+        name: &str,
+    ) -> candle_core::Result<&'a Tensor> {
+        values
+            .get(name)
+            .or_else(|| self.constants.get(name))
+            .ok_or_else(|| candle_core::Error::Msg(format!("unknown tensor `{name}`")))
+    }
+
+    fn apply(&self, op: &Op, values: &BTreeMap<&str, Tensor>) -> candle_core::Result<Tensor> {
+        let arg = |i: usize| self.tensor(values, &op.inputs[i]);
+        match &op.kind {
+            Kind::Conv2d {
+                stride,
+                padding,
+                activation,
+            } => {
+                let (x, w) = (arg(0)?, arg(1)?);
+                let (kh, kw) = (w.dim(2)?, w.dim(3)?);
+                let x = pad_for(x, *padding, [kh, kw], *stride)?;
+                let y = x.conv2d(w, 0, stride[0], 1, 1)?;
+                let y = y.broadcast_add(&arg(2)?.reshape((1, (), 1, 1))?)?;
+                activate(y, *activation)
+            }
+            Kind::DepthwiseConv2d {
+                stride,
+                padding,
+                activation,
+            } => {
+                let (x, w) = (arg(0)?, arg(1)?);
+                let y = depthwise(x, w, *padding, *stride)?;
+                let y = y.broadcast_add(&arg(2)?.reshape((1, (), 1, 1))?)?;
+                activate(y, *activation)
+            }
+            Kind::MaxPool2d {
+                stride,
+                filter,
+                padding,
+                activation,
+            } => {
+                if *padding == Padding::Same && !divides(arg(0)?, *filter, *stride)? {
+                    candle_core::bail!("SAME max pooling that needs padding is not supported");
+                }
+                let y = arg(0)?
+                    .max_pool2d_with_stride((filter[0], filter[1]), (stride[0], stride[1]))?;
+                activate(y, *activation)
+            }
+            Kind::Add { activation } => activate(arg(0)?.broadcast_add(arg(1)?)?, *activation),
+            Kind::Concat { axis, activation } => {
+                let parts = (0..op.inputs.len())
+                    .map(arg)
+                    .collect::<candle_core::Result<Vec<_>>>()?;
+                let rank = parts[0].rank();
+                let axis = if *axis < 0 { rank as i64 + axis } else { *axis } as usize;
+                activate(Tensor::cat(&parts, nchw_axis(rank, axis))?, *activation)
+            }
+            Kind::Pad { paddings } => {
+                let mut x = arg(0)?.clone();
+                let rank = x.rank();
+                for (axis, [before, after]) in paddings.iter().enumerate() {
+                    if before + after > 0 {
+                        x = x.pad_with_zeros(nchw_axis(rank, axis), *before, *after)?;
+                    }
+                }
+                Ok(x)
+            }
+            Kind::Reshape => {
+                let x = arg(0)?;
+                let x = if x.rank() == 4 {
+                    x.permute((0, 2, 3, 1))?.contiguous()?
+                } else {
+                    x.clone()
+                };
+                let y = x.reshape(op.output_shape.clone())?;
+                if y.rank() == 4 {
+                    y.permute((0, 3, 1, 2))?.contiguous()
+                } else {
+                    Ok(y)
+                }
+            }
+            Kind::Relu => arg(0)?.relu(),
+            Kind::Prelu => {
+                let (x, alpha) = (arg(0)?, arg(1)?.reshape((1, (), 1, 1))?);
+                let negative = x.neg()?.relu()?.broadcast_mul(&alpha)?;
+                x.relu()? - negative
+            }
+        }
+    }
+}
+
+/// The NCHW axis of a TFLite (NHWC) axis for rank-4 tensors; other ranks are unchanged.
+fn nchw_axis(rank: usize, axis: usize) -> usize {
+    if rank == 4 {
+        [0, 2, 3, 1][axis]
+    } else {
+        axis
+    }
+}
+
+fn nhwc_dims(t: &Tensor) -> Vec<usize> {
+    let d = t.dims();
+    if d.len() == 4 {
+        vec![d[0], d[2], d[3], d[1]]
+    } else {
+        d.to_vec()
+    }
+}
+
+fn divides(x: &Tensor, filter: [usize; 2], stride: [usize; 2]) -> candle_core::Result<bool> {
+    let (h, w) = (x.dim(2)?, x.dim(3)?);
+    Ok(filter == stride && h % stride[0] == 0 && w % stride[1] == 0)
+}
+
+/// TFLite's padding: SAME pads `max((out - 1) s + k - in, 0)` with the odd pixel after.
+fn pad_for(
+    x: &Tensor,
+    padding: Padding,
+    kernel: [usize; 2],
+    stride: [usize; 2],
+) -> candle_core::Result<Tensor> {
+    if padding == Padding::Valid {
+        return Ok(x.clone());
+    }
+    let mut x = x.clone();
+    for (axis, (k, s)) in [(2, (kernel[0], stride[0])), (3, (kernel[1], stride[1]))] {
+        let n = x.dim(axis)?;
+        let out = n.div_ceil(s);
+        let total = ((out - 1) * s + k).saturating_sub(n);
+        if total > 0 {
+            x = x.pad_with_zeros(axis, total / 2, total - total / 2)?;
+        }
+    }
+    Ok(x)
+}
+
+/// A depthwise convolution (one filter per channel) as a sum of shifted, strided views of the
+/// padded input times each tap's per-channel weight: k*k broadcast products on whole maps.
+fn depthwise(
+    x: &Tensor,
+    w: &Tensor,
+    padding: Padding,
+    stride: [usize; 2],
+) -> candle_core::Result<Tensor> {
+    let (kh, kw) = (w.dim(2)?, w.dim(3)?);
+    let (h, wd) = (x.dim(2)?, x.dim(3)?);
+    let (oh, ow) = match padding {
+        Padding::Same => (h.div_ceil(stride[0]), wd.div_ceil(stride[1])),
+        Padding::Valid => ((h - kh) / stride[0] + 1, (wd - kw) / stride[1] + 1),
+    };
+    let xp = pad_for(x, padding, [kh, kw], stride)?;
+    let mut sum: Option<Tensor> = None;
+    for i in 0..kh {
+        for j in 0..kw {
+            let view = xp.narrow(2, i, (oh - 1) * stride[0] + 1)?.narrow(
+                3,
+                j,
+                (ow - 1) * stride[1] + 1,
+            )?;
+            let view = if stride == [1, 1] {
+                view
+            } else {
+                strided(&view, stride)?
+            };
+            let tap = w.narrow(2, i, 1)?.narrow(3, j, 1)?.reshape((1, (), 1, 1))?;
+            let term = view.broadcast_mul(&tap)?;
+            sum = Some(match sum {
+                None => term,
+                Some(s) => (s + term)?,
+            });
+        }
+    }
+    sum.ok_or_else(|| candle_core::Error::Msg("empty depthwise kernel".into()))
+}
+
+/// Every `stride`-th row and column (the first included).
+fn strided(x: &Tensor, stride: [usize; 2]) -> candle_core::Result<Tensor> {
+    let (n, c, h, w) = x.dims4()?;
+    let (oh, ow) = ((h - 1) / stride[0] + 1, (w - 1) / stride[1] + 1);
+    // Pad to a multiple of the stride, split each spatial axis into (out, stride), take index 0.
+    let x = x.pad_with_zeros(2, 0, oh * stride[0] - h)?;
+    let x = x.pad_with_zeros(3, 0, ow * stride[1] - w)?;
+    x.reshape((n, c, oh, stride[0], ow, stride[1]))?
+        .narrow(3, 0, 1)?
+        .narrow(5, 0, 1)?
+        .reshape((n, c, oh, ow))
+}
+
+fn activate(y: Tensor, activation: Activation) -> candle_core::Result<Tensor> {
+    match activation {
+        Activation::None => Ok(y),
+        Activation::Relu => y.relu(),
+        Activation::Relu6 => y.clamp(0f32, 6f32),
+    }
+}
+
+/// A tensor's values, flattened, as f32.
+pub fn values(t: &Tensor) -> candle_core::Result<Vec<f32>> {
+    t.flatten_all()?.to_vec1::<f32>()
+}
