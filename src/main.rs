@@ -132,6 +132,15 @@ enum Command {
     /// real OpenFace file's 3D landmarks (--openface), recompute the AU gains (--calibrate), or
     /// fit the observer to OpenFace on real faces (--fit).
     Observe {
+        /// A photo (PNG, JPEG), a folder of frames, an animated GIF or a video (via ffmpeg),
+        /// through the built-in landmarker: writes openface.csv, landmarks.csv and the
+        /// landmarks drawn into the folder --out
+        #[arg(conflicts_with_all = ["openface", "fit", "calibrate"], requires = "out")]
+        input: Option<PathBuf>,
+        /// For a picture input: the neutral face [default: model for one picture, median
+        /// for several]
+        #[arg(long, value_parser = ["model", "median"], requires = "input")]
+        neutral: Option<String>,
         #[command(flatten)]
         face: FaceArgs,
         /// AU calibration table: gains (experiments/au_calibration.csv, the default) or a
@@ -206,15 +215,25 @@ enum Command {
     /// Transfer the expressions of an OpenFace CSV (its AUxx_r columns) onto the model
     /// through a run's unified network.
     Transfer {
+        /// A photo (PNG, JPEG), a folder of frames, an animated GIF, a video (via ffmpeg) or an
+        /// OpenFace 2.x CSV; the kind is told from the content
+        #[arg(required_unless_present = "openface", conflicts_with = "openface")]
+        input: Option<PathBuf>,
         /// OpenFace 2.x CSV (FeatureExtraction or FaceLandmarkImg output)
         #[arg(long)]
-        openface: PathBuf,
+        openface: Option<PathBuf>,
         /// Run folder with unified.safetensors, training_aus.csv and spec.toml
         #[arg(long, default_value = "results/paper/latest")]
         model: PathBuf,
         /// Map each AU across the file onto the training data's range before the network
-        #[arg(long, value_parser = ["none", "minmax", "zscore"], default_value = "minmax")]
-        normalize: String,
+        /// [default: minmax for OpenFace files; none for pictures, whose AUs the run's own
+        /// observer reads]
+        #[arg(long, value_parser = ["none", "minmax", "zscore"])]
+        normalize: Option<String>,
+        /// For pictures: the neutral face the AUs are read against [default: model for one
+        /// picture, median for several]
+        #[arg(long, value_parser = ["model", "median"])]
+        neutral: Option<String>,
         /// Frames to render as PNG [default: first, middle and last]
         #[arg(long, value_delimiter = ',')]
         frames: Vec<i64>,
@@ -388,6 +407,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             println!("wrote {} images to {}", written.len(), out.display());
         }
         Command::Observe {
+            input,
+            neutral,
             face,
             calibration,
             calibrate,
@@ -403,6 +424,22 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         } => {
             let path = calibration.unwrap_or_else(default_calibration_path);
             let stdout = &mut std::io::stdout().lock();
+            if let Some(input) = input {
+                let out = out.expect("clap requires --out with an input");
+                let model = face.source().model()?;
+                let l = facelab::experiments::photos::landmark_input(
+                    &input,
+                    &out,
+                    &model,
+                    read_any_calibration(&path)?,
+                    neutral.as_deref().map(photo_neutral),
+                )?;
+                print_landmarked(&l);
+                for p in &l.written {
+                    println!("wrote {}", p.display());
+                }
+                return Ok(());
+            }
             if let Some(input) = openface {
                 let out = out.expect("clap requires --out with --openface");
                 let neutral = match neutral_frame {
@@ -505,23 +542,35 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Command::Transfer {
+            input,
             openface,
             model,
             normalize,
+            neutral,
             frames,
             ignore_pose,
             neck,
             out,
         } => {
-            let summary = transfer::transfer_openface(&transfer::TransferOptions {
-                openface,
-                model,
-                normalize: Normalization::parse(&normalize).expect("clap checked"),
-                out,
-                render_frames: frames,
-                ignore_pose,
-                neck,
-            })?;
+            let input = input.or(openface).expect("clap requires an input");
+            let (summary, landmarked) = transfer::transfer_path(
+                &input,
+                &transfer::TransferOptions {
+                    openface: input.clone(),
+                    model,
+                    normalize: Normalization::None,
+                    out,
+                    render_frames: frames,
+                    ignore_pose,
+                    neck,
+                    pictures: None,
+                },
+                normalize.map(|n| Normalization::parse(&n).expect("clap checked")),
+                neutral.as_deref().map(photo_neutral),
+            )?;
+            if let Some(l) = &landmarked {
+                print_landmarked(l);
+            }
             if let Some((rms, max)) = summary.pose_error {
                 println!("head pose through the neck: RMS error {rms:.2} deg, max {max:.2} deg");
             }
@@ -681,6 +730,24 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 
 /// Sets the worker count for rayon and for candle (which reads `RAYON_NUM_THREADS` on every
 /// matrix product when it is unset, at a cost). Returns the count used.
+fn photo_neutral(name: &str) -> facelab::experiments::photos::PhotoNeutral {
+    use facelab::experiments::photos::PhotoNeutral;
+    match name {
+        "model" => PhotoNeutral::Model,
+        _ => PhotoNeutral::Median,
+    }
+}
+
+fn print_landmarked(l: &facelab::experiments::photos::LandmarkOutput) {
+    for w in &l.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!(
+        "{:?}: a face in {} frame(s), none in {}",
+        l.kind, l.faces, l.missing
+    );
+}
+
 fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
     let n = threads.unwrap_or_else(|| {
         std::thread::available_parallelism()

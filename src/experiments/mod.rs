@@ -7,6 +7,7 @@ pub mod face;
 pub mod headpose;
 pub mod inversion;
 pub mod observe;
+pub mod photos;
 pub mod reach;
 pub mod realfaces;
 pub mod run;

@@ -19,7 +19,7 @@ use crate::io::atomic::write_atomic;
 use crate::io::openface::{read_openface, write_openface, FaceRow};
 use crate::learn::{Mlp, Normalization, Normalizer};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
-use crate::report::compose::gif_bytes;
+use crate::report::compose::{gif_bytes, side_by_side};
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::controls::control_names;
@@ -40,6 +40,9 @@ pub struct TransferOptions {
     /// A run folder with `voluntary.safetensors` and `spec.toml` (whose `[headpose]` gives the
     /// neck the controller was trained on); `None`: `model`.
     pub neck: Option<PathBuf>,
+    /// The input's pictures (photos or video frames with their landmarks drawn), indexed by
+    /// the file's `frame` - 1: renders and the GIF then show each beside the model's face.
+    pub pictures: Option<Vec<RgbImage>>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -232,11 +235,19 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
                 }
                 None => state,
             };
+            let picture = opts
+                .pictures
+                .as_ref()
+                .and_then(|p| p.get(usize::try_from(frame - 1).ok()?));
+            let beside = |face: RgbImage| match picture {
+                Some(p) => side_by_side(p, &face),
+                None => face,
+            };
             if wanted.contains(&frame) {
-                stills.push((frame, render(&model, state, &still)));
+                stills.push((frame, beside(render(&model, state, &still))));
             }
             if n > 1 && i % gif_every == 0 {
-                frames.push(render(&model, state, &cell));
+                frames.push(beside(render(&model, state, &cell)));
             }
             Ok(())
         },
@@ -408,4 +419,42 @@ fn drive_neck(
         pose: (0..rows.len()).map(|i| run.pose[pick(i)]).collect(),
         offset: (0..rows.len()).map(|i| run.skull_offset[pick(i)]).collect(),
     })
+}
+
+/// `facelab transfer PATH`: an OpenFace CSV goes straight to [`transfer_openface`]
+/// (normalization `normalize`, default min-max); a photo, folder, GIF or video first goes
+/// through the built-in landmarker ([`super::photos::landmark_input`]), which writes
+/// `openface.csv` into the output folder with AUs read by the run's own observer (its spec's
+/// calibration), so they are on the training data's scale and need no normalization (default
+/// `none`). Returns the landmarker's summary for image inputs.
+pub fn transfer_path(
+    input: &Path,
+    opts: &TransferOptions,
+    normalize: Option<Normalization>,
+    neutral: Option<super::photos::PhotoNeutral>,
+) -> Result<(TransferSummary, Option<super::photos::LandmarkOutput>)> {
+    use super::photos::{input_kind, landmark_input, InputKind};
+    if input_kind(input)? == InputKind::OpenFace {
+        let opts = TransferOptions {
+            openface: input.to_path_buf(),
+            normalize: normalize.unwrap_or(Normalization::MinMax),
+            ..opts.clone()
+        };
+        return Ok((transfer_openface(&opts)?, None));
+    }
+    let spec = run_spec(&opts.model)?;
+    let model = FaceSource::of_spec(&spec).model()?;
+    let calibration = super::run::spec_calibration(&spec)?;
+    let landmarked = landmark_input(input, &opts.out, &model, calibration, neutral)?;
+    let opts = TransferOptions {
+        openface: landmarked.openface.clone(),
+        normalize: normalize.unwrap_or(Normalization::None),
+        pictures: Some(landmarked.pictures.clone()),
+        ..opts.clone()
+    };
+    let mut summary = transfer_openface(&opts)?;
+    let mut written = landmarked.written.clone();
+    written.append(&mut summary.written);
+    summary.written = written;
+    Ok((summary, Some(landmarked)))
 }

@@ -53,6 +53,9 @@ pub struct FaceRow {
     pub face_id: Option<i64>,
     pub timestamp: Option<f64>,
     pub confidence: f64,
+    /// `success`: the reader keeps only rows with 1; a writer's row with `false` (a frame
+    /// with no face) is written with zeros in every value column.
+    pub success: bool,
     /// `AUxx_r` in `AU_NAMES` order.
     pub aus: [f64; AU_COUNT],
     /// `pose_Tx, Ty, Tz` (mm), `pose_Rx, Ry, Rz` (radians).
@@ -359,6 +362,7 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
             face_id: get("face_id", r).map(|v| v as i64),
             timestamp: get("timestamp", r),
             confidence: get("confidence", r).unwrap_or(1.0),
+            success: true,
             aus,
             pose,
             landmarks_2d,
@@ -374,8 +378,8 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
 }
 
 /// Writes rows as OpenFace 2.2's FeatureExtraction does (`,` separator): `frame, face_id,
-/// timestamp, confidence, success`, the pose block if every row has one, the 3D landmarks if
-/// every row has them, then the 17 `AUxx_r` columns, with OpenFace's decimals (AUs 2, pose
+/// timestamp, confidence, success`, the pose block if every row has one, the 2D and then the
+/// 3D landmarks if every row has them, then the 17 `AUxx_r` columns, with OpenFace's decimals (AUs 2, pose
 /// rotation 3, translation and landmarks 1, timestamp 3, confidence 2). The write is atomic.
 pub fn write_openface(path: &Path, rows: &[FaceRow]) -> anyhow::Result<()> {
     let bytes = openface_bytes(rows)?;
@@ -396,13 +400,22 @@ pub fn openface_bytes(rows: &[FaceRow]) -> anyhow::Result<Vec<u8>> {
         format!("{:.3}", r.timestamp.unwrap_or(0.0))
     });
     text("confidence", &|r| format!("{:.2}", r.confidence));
-    text("success", &|_| "1".to_string());
+    text("success", &|r| u8::from(r.success).to_string());
     if !rows.is_empty() && rows.iter().all(|r| r.pose.is_some()) {
         for (k, name) in pose_columns().iter().enumerate() {
             let decimals = if k < 3 { 1 } else { 3 };
             text(name, &|r| {
                 format!("{:.*}", decimals, r.pose.expect("checked")[k])
             });
+        }
+    }
+    if !rows.is_empty() && rows.iter().all(|r| r.landmarks_2d.is_some()) {
+        for (axis, name) in ["x", "y"].iter().enumerate() {
+            for i in 0..LANDMARK_COUNT {
+                text(&format!("{name}_{i}"), &|r| {
+                    format!("{:.1}", r.landmarks_2d.as_ref().expect("checked")[i][axis])
+                });
+            }
         }
     }
     if !rows.is_empty() && rows.iter().all(|r| r.landmarks_3d.is_some()) {

@@ -14,6 +14,7 @@
 
 pub mod detect;
 pub mod graph;
+pub mod metric;
 pub mod warp;
 
 use candle_core::{Device, Tensor};

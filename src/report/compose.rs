@@ -120,3 +120,40 @@ pub fn contact_sheet(
     }
     Ok(canvas)
 }
+
+/// A photo frame with landmarks drawn as small green dots.
+pub fn annotate(width: usize, height: usize, rgb: &[u8], points: Option<&[[f64; 3]]>) -> RgbImage {
+    let mut img = RgbImage::from_raw(width as u32, height as u32, rgb.to_vec())
+        .expect("frame size matches its pixels");
+    if let Some(points) = points {
+        let r = (width.max(height) / 1000).max(1) as i64;
+        for p in points {
+            let (cx, cy) = (p[0].round() as i64, p[1].round() as i64);
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let (x, y) = (cx + dx, cy + dy);
+                    if dx * dx + dy * dy <= r * r
+                        && (0..width as i64).contains(&x)
+                        && (0..height as i64).contains(&y)
+                    {
+                        img.put_pixel(x as u32, y as u32, Rgb([40, 230, 90]));
+                    }
+                }
+            }
+        }
+    }
+    img
+}
+
+/// `left` scaled to `right`'s height, then `right` beside it.
+pub fn side_by_side(left: &RgbImage, right: &RgbImage) -> RgbImage {
+    let h = right.height();
+    let w = ((left.width() as f64) * h as f64 / left.height() as f64)
+        .round()
+        .max(1.0) as u32;
+    let scaled = image::imageops::resize(left, w, h, image::imageops::FilterType::Triangle);
+    let mut out = RgbImage::new(w + right.width(), h);
+    image::imageops::replace(&mut out, &scaled, 0, 0);
+    image::imageops::replace(&mut out, right, w as i64, 0);
+    out
+}
