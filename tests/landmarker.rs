@@ -100,3 +100,282 @@ fn landmarks_match_mediapipe_on_every_test_photo() {
     }
     assert_eq!(faces, 4);
 }
+
+fn facelab(args: &[&str]) -> (bool, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(args)
+        .output()
+        .expect("run facelab");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn photo(stem: &str) -> String {
+    data()
+        .join(format!("photos/{stem}.png"))
+        .display()
+        .to_string()
+}
+
+/// The AU row of a one-frame openface.csv, read back by facelab's own OpenFace reader.
+fn observed(dir: &std::path::Path) -> facelab::io::openface::FaceRow {
+    let file = facelab::io::openface::read_openface(&dir.join("openface.csv")).unwrap();
+    assert_eq!(file.rows.len(), 1);
+    assert!(file.layout.landmarks_3d, "3D landmarks written");
+    file.rows[0].clone()
+}
+
+#[test]
+fn a_photo_is_observed_into_an_openface_file_and_the_smile_reads_as_one() {
+    let dir = crate::temp("landmarker", "observe");
+    let mut rows = Vec::new();
+    for stem in ["render_rest", "render_joy"] {
+        let out = dir.join(stem);
+        let (ok, stdout, err) = facelab(&["observe", &photo(stem), "--out", out.to_str().unwrap()]);
+        assert!(ok, "{err}");
+        assert!(stdout.contains("a face in 1 frame(s)"), "{stdout}");
+        for f in ["openface.csv", "landmarks.csv", "landmarks.png"] {
+            assert!(out.join(f).exists(), "{f}");
+        }
+        let lines = std::fs::read_to_string(out.join("landmarks.csv"))
+            .unwrap()
+            .lines()
+            .count();
+        assert_eq!(lines, 1 + 468);
+        rows.push(observed(&out));
+    }
+    let au = |r: &facelab::io::openface::FaceRow, name: &str| {
+        r.aus[facelab::observe::AU_NAMES
+            .iter()
+            .position(|a| *a == name)
+            .unwrap()]
+    };
+    // The model's own faces, photographed: joy raises the cheeks and the lip corners.
+    assert!(
+        au(&rows[1], "AU12") > au(&rows[0], "AU12") + 0.3,
+        "{rows:?}"
+    );
+    assert!(au(&rows[1], "AU06") > au(&rows[0], "AU06") + 0.3);
+    // A frontal render: the head pose comes out near zero.
+    for r in &rows {
+        let p = r.pose.unwrap();
+        assert!(p[3..].iter().all(|a| a.abs() < 0.1), "pose {p:?}");
+    }
+}
+
+#[test]
+fn a_folder_and_a_gif_give_one_row_per_frame_with_no_face_frames_marked() {
+    let dir = crate::temp("landmarker", "folder");
+    let frames = dir.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    let mut images = Vec::new();
+    for (i, stem) in ["render_rest", "render_joy", "render_mouth_open", "coffee"]
+        .iter()
+        .enumerate()
+    {
+        let img = image::open(photo(stem)).unwrap().to_rgb8();
+        let img = image::imageops::resize(&img, 240, 280, image::imageops::FilterType::Triangle);
+        img.save(frames.join(format!("{i:02}.png"))).unwrap();
+        images.push(img);
+    }
+    std::fs::write(frames.join("notes.txt"), "not an image").unwrap();
+    let gif = dir.join("clip.gif");
+    std::fs::write(
+        &gif,
+        facelab::report::compose::gif_bytes(&images, 100).unwrap(),
+    )
+    .unwrap();
+    for (input, name) in [(&frames, "folder"), (&gif, "gif")] {
+        let out = dir.join(format!("out-{name}"));
+        let (ok, stdout, err) = facelab(&[
+            "observe",
+            input.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{name}: {err}");
+        assert!(
+            stdout.contains("a face in 3 frame(s), none in 1"),
+            "{name}: {stdout}"
+        );
+        assert!(err.contains("no face in 1 of 4 frames"), "{name}: {err}");
+        let text = std::fs::read_to_string(out.join("openface.csv")).unwrap();
+        assert_eq!(text.lines().count(), 5, "{name}: a row per frame");
+        let file = facelab::io::openface::read_openface(&out.join("openface.csv")).unwrap();
+        assert_eq!((file.rows.len(), file.skipped), (3, 1), "{name}");
+        assert!(out.join("landmarks.gif").exists());
+    }
+}
+
+/// With ffmpeg on PATH (CI installs it), a video is decoded and landmarked; without it, the
+/// error says what to install.
+#[test]
+fn a_video_goes_through_ffmpeg_or_the_error_says_to_install_it() {
+    let dir = crate::temp("landmarker", "video");
+    let have_ffmpeg = std::process::Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_ok();
+    let out = dir.join("out");
+    if !have_ffmpeg {
+        let clip = dir.join("clip.mp4");
+        std::fs::write(&clip, b"\x00\x00\x00\x18ftypmp42 not really a video").unwrap();
+        let (ok, _, err) = facelab(&[
+            "observe",
+            clip.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!ok);
+        assert!(
+            err.contains("apt-get install ffmpeg") && err.contains("clip.mp4"),
+            "{err}"
+        );
+        assert!(!out.exists());
+        return;
+    }
+    for (i, stem) in ["render_rest", "render_joy", "render_joy", "render_rest"]
+        .iter()
+        .enumerate()
+    {
+        std::fs::copy(photo(stem), dir.join(format!("f{i}.png"))).unwrap();
+    }
+    let clip = dir.join("clip.mp4");
+    let status = std::process::Command::new("ffmpeg")
+        .args(["-v", "error", "-y", "-framerate", "10", "-i"])
+        .arg(dir.join("f%d.png"))
+        .args(["-pix_fmt", "yuv420p", "-vf", "scale=240:280"])
+        .arg(&clip)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let (ok, stdout, err) = facelab(&[
+        "observe",
+        clip.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        stdout.contains("Video: a face in 4 frame(s), none in 0"),
+        "{stdout}"
+    );
+    let file = facelab::io::openface::read_openface(&out.join("openface.csv")).unwrap();
+    assert_eq!(file.rows.len(), 4);
+    // 10 fps: timestamps 0.1 s apart.
+    assert!((file.rows[1].timestamp.unwrap() - 0.1).abs() < 1e-9);
+    // Against the clip's median face, the smiling frames read a higher AU12.
+    let k = facelab::observe::AU_NAMES
+        .iter()
+        .position(|a| *a == "AU12")
+        .unwrap();
+    assert!(
+        file.rows[1].aus[k] > file.rows[0].aus[k] + 0.2,
+        "{:?}",
+        file.rows
+    );
+    // A file ffmpeg reads but that has no video stream.
+    let wav = dir.join("tone.wav");
+    let status = std::process::Command::new("ffmpeg")
+        .args([
+            "-v",
+            "error",
+            "-y",
+            "-f",
+            "lavfi",
+            "-i",
+            "sine=duration=0.2",
+        ])
+        .arg(&wav)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out2 = dir.join("out2");
+    let (ok, _, err) = facelab(&[
+        "observe",
+        wav.to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(
+        err.contains("tone.wav") && err.contains("video stream"),
+        "{err}"
+    );
+    assert!(!out2.exists());
+}
+
+#[test]
+fn bad_pictures_are_named_and_nothing_is_written() {
+    let dir = crate::temp("landmarker", "bad");
+    let empty = dir.join("empty.png");
+    std::fs::write(&empty, b"").unwrap();
+    let whole = std::fs::read(photo("render_rest")).unwrap();
+    let truncated = dir.join("truncated.png");
+    std::fs::write(&truncated, &whole[..whole.len() / 3]).unwrap();
+    let tiny = dir.join("tiny.png");
+    image::RgbImage::new(1, 1).save(&tiny).unwrap();
+    let no_images = dir.join("no_images");
+    std::fs::create_dir_all(&no_images).unwrap();
+    std::fs::write(no_images.join("readme.txt"), "hello").unwrap();
+    let cases = [
+        (&empty, "0 bytes"),
+        (&truncated, "cannot decode"),
+        (&tiny, "1x1 pixels"),
+        (&no_images, "no images"),
+    ];
+    for (input, message) in cases {
+        for command in ["observe", "transfer"] {
+            let out = dir.join(format!("out-{command}"));
+            let (ok, _, err) = facelab(&[
+                command,
+                input.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ]);
+            assert!(!ok, "{command} {}", input.display());
+            let name = input.file_name().unwrap().to_str().unwrap();
+            assert!(
+                err.contains(name) && err.contains(message),
+                "{command}: {err}"
+            );
+            assert!(!out.exists(), "{command}: nothing written for {name}");
+        }
+    }
+    // A photo with no face: a clear error, nothing written.
+    let out = dir.join("out-coffee");
+    let (ok, _, err) = facelab(&["observe", &photo("coffee"), "--out", out.to_str().unwrap()]);
+    assert!(!ok && err.contains("no face found"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn a_photo_transfers_with_the_picture_beside_the_face() {
+    let out = crate::temp("landmarker", "transfer").join("out");
+    let model = root().join("results/paper/latest");
+    let (ok, stdout, err) = facelab(&[
+        "transfer",
+        &photo("render_joy"),
+        "--model",
+        model.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("1 frames transferred"), "{stdout}");
+    for f in [
+        "openface.csv",
+        "landmarks.csv",
+        "transferred.csv",
+        "activations.csv",
+        "frame_00001.png",
+    ] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    // The render is the picture (cut to the face) beside the model's face: wider than tall.
+    let (w, h) = image::image_dimensions(out.join("frame_00001.png")).unwrap();
+    assert!(w > h, "{w}x{h}");
+}

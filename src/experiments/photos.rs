@@ -273,9 +273,10 @@ fn read_video(path: &Path) -> Result<(Vec<RgbFrame>, f64)> {
     Ok((frames, fps))
 }
 
-/// Runs the landmarker over every frame: detection on the first frame and whenever the face
-/// is lost, tracking from the previous frame's landmarks otherwise (MediaPipe's video mode);
-/// a photo with several faces takes the largest.
+/// Runs the landmarker over every frame: for a video or GIF, detection on the first frame and
+/// whenever the face is lost, tracking from the previous frame's landmarks otherwise
+/// (MediaPipe's video mode); a folder's pictures are each detected. A frame with several
+/// faces takes the largest.
 pub fn landmark_frames(
     landmarker: &Landmarker,
     model: &FaceModel,
@@ -291,9 +292,10 @@ pub fn landmark_frames(
     let mut previous: Option<FaceMesh> = None;
     let mut missing = Vec::new();
     for (i, frame) in frames.iter().enumerate() {
+        // A folder holds separate pictures: each is detected (MediaPipe's static mode).
         let tracked = match &previous {
-            Some(p) => landmarker.track(frame, p)?,
-            None => None,
+            Some(p) if kind != InputKind::Folder => landmarker.track(frame, p)?,
+            _ => None,
         };
         let (mesh, faces_found) = match tracked {
             Some(m) => (Some(m), 1),
