@@ -326,6 +326,19 @@ enum FaceCommand {
 
 #[derive(Subcommand)]
 enum Bench {
+    /// The picture path per 640x360 frame on one thread (detection, landmarks, metric fit,
+    /// observer) and a clip from frames in memory to AU rows.
+    Landmark {
+        /// Repetitions per stage
+        #[arg(long, default_value_t = 50)]
+        frames: usize,
+        /// Clip length at 24 fps
+        #[arg(long, default_value_t = 20.0)]
+        seconds: f64,
+        /// Threads for the clip [default: 1]
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+    },
     /// Nonlinear and linear-basis solve times and the basis' landmark error.
     Solve {
         #[command(flatten)]
@@ -683,6 +696,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         },
         Command::Bench { what } => match what {
+            Bench::Landmark {
+                frames,
+                seconds,
+                threads,
+            } => {
+                set_threads(Some(threads))?;
+                facelab::experiments::bench::bench_landmark(
+                    frames,
+                    seconds,
+                    &mut std::io::stdout().lock(),
+                )?
+            }
             Bench::Train {
                 pairs,
                 epochs,
