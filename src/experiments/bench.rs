@@ -706,7 +706,7 @@ pub fn bench_landmark(frames: usize, seconds: f64, out: &mut impl Write) -> Resu
     };
     let detection = landmarker.detector.detect(&frame)?;
     let face = anyhow::Context::context(detection.first(), "the bench photo has a face")?.clone();
-    let rect = face.face_rect(frame.width, frame.height);
+    let rect = face.face_rect();
     let mesh = landmarker.mesh.run(&frame, &rect)?;
     let detect_ms = time(&mut || {
         std::hint::black_box(landmarker.detector.detect(&frame)?);

@@ -111,6 +111,16 @@ pub struct Agreement {
     pub mean_abs_diff: [f64; AU_COUNT],
 }
 
+/// The per-landmark, per-coordinate median of `faces`.
+pub(crate) fn median_face(faces: &[[V3; LANDMARK_COUNT]]) -> [V3; LANDMARK_COUNT] {
+    std::array::from_fn(|i| {
+        std::array::from_fn(|k| {
+            let mut v: Vec<f64> = faces.iter().map(|f| f[i][k]).collect();
+            median(&mut v)
+        })
+    })
+}
+
 /// The median (NaN for no values); sorts `values`.
 pub(crate) fn median(values: &mut [f64]) -> f64 {
     values.sort_by(f64::total_cmp);
@@ -159,12 +169,7 @@ fn neutral_of(
     neutral: Neutral,
 ) -> Result<[V3; LANDMARK_COUNT]> {
     Ok(match neutral {
-        Neutral::Median => std::array::from_fn(|i| {
-            std::array::from_fn(|k| {
-                let mut v: Vec<f64> = faces.iter().map(|f| f[i][k]).collect();
-                median(&mut v)
-            })
-        }),
+        Neutral::Median => median_face(faces),
         Neutral::Frame(frame) => {
             let row = file
                 .rows

@@ -369,12 +369,7 @@ pub fn observer_for(
             if faces.is_empty() {
                 bail!("no frame with a face to take the neutral from");
             }
-            std::array::from_fn(|i| {
-                std::array::from_fn(|k| {
-                    let mut v: Vec<f64> = faces.iter().map(|f| f[i][k]).collect();
-                    super::observe::median(&mut v)
-                })
-            })
+            super::observe::median_face(&faces)
         }
         PhotoNeutral::Frame(i) => match found.get(i).and_then(|f| f.metric.as_ref()) {
             Some(m) => model_landmarks(m),

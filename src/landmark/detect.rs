@@ -31,7 +31,7 @@ impl Detection {
     }
 
     /// MediaPipe's landmark crop for this face.
-    pub fn face_rect(&self, _width: usize, _height: usize) -> RotatedRect {
+    pub fn face_rect(&self) -> RotatedRect {
         let [x, y, w, h] = self.bbox;
         RotatedRect::face(
             [x + w / 2.0, y + h / 2.0],
@@ -168,10 +168,7 @@ fn weighted_nms(mut found: Vec<Detection>) -> Vec<Detection> {
             .into_iter()
             .partition(|d| iou(&d.bbox, &top.bbox) > SUPPRESSION_IOU);
         found = rest;
-        if group.is_empty() {
-            // The top box overlaps itself fully, so it is always in its own group.
-            unreachable!("a box is its own neighbour");
-        }
+        // The top box overlaps itself fully, so `group` always holds it.
         let total: f64 = group.iter().map(|d| d.score).sum();
         let mut corners = [0.0; 4];
         let mut keypoints = [[0.0; 2]; KEYPOINTS];

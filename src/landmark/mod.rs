@@ -119,7 +119,7 @@ impl Landmarker {
     pub fn faces(&self, frame: &RgbFrame) -> Result<Vec<Face>, GraphError> {
         let mut faces = Vec::new();
         for detection in self.detector.detect(frame)? {
-            let rect = detection.face_rect(frame.width, frame.height);
+            let rect = detection.face_rect();
             let mesh = self.mesh.run(frame, &rect)?;
             if mesh.score >= 0.5 {
                 faces.push(Face { detection, mesh });
@@ -137,7 +137,7 @@ impl Landmarker {
         frame: &RgbFrame,
         previous: &FaceMesh,
     ) -> Result<Option<FaceMesh>, GraphError> {
-        let rect = RotatedRect::from_landmarks(&previous.points, frame.width, frame.height);
+        let rect = RotatedRect::from_landmarks(&previous.points);
         let mesh = self.mesh.run(frame, &rect)?;
         Ok((mesh.score >= TRACKING_SCORE).then_some(mesh))
     }

@@ -82,7 +82,7 @@ impl RotatedRect {
     /// The crop for the next video frame from this frame's landmarks
     /// (`face_landmark_landmarks_to_roi`): their bounding box, turned by the eye corners 33
     /// and 263.
-    pub fn from_landmarks(points: &[[f64; 3]], _width: usize, _height: usize) -> RotatedRect {
+    pub fn from_landmarks(points: &[[f64; 3]]) -> RotatedRect {
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for p in points {
             for a in 0..2 {
