@@ -379,3 +379,51 @@ fn a_photo_transfers_with_the_picture_beside_the_face() {
     let (w, h) = image::image_dimensions(out.join("frame_00001.png")).unwrap();
     assert!(w > h, "{w}x{h}");
 }
+
+/// `observer.source = "render"`: every simulated face is rendered and read through the
+/// landmarker, with the same bytes on 1 and 2 threads, and the readings are not the mesh's.
+#[test]
+fn the_render_source_reads_pictures_of_the_face_the_same_on_any_thread_count() {
+    let dir = crate::temp("landmarker", "render-source");
+    let run = |name: &str, source: &str, threads: &str| {
+        let results = dir.join(name).join("results");
+        let r = results.display().to_string();
+        let source = format!("observer.source={source}");
+        let out = crate::facelab(&[
+            "run",
+            "experiments/smoke.toml",
+            "--results",
+            &r,
+            "--threads",
+            threads,
+            "--set",
+            &source,
+            "--set",
+            "seeds=[1]",
+            "--set",
+            "tables=[\"table1\", \"table2\"]",
+            "--set",
+            "cohort.talking_videos.frames=2",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        results.join("smoke/latest")
+    };
+    let one = run("one", "render", "1");
+    let two = run("two", "render", "2");
+    let files = [
+        "table1.csv",
+        "reference.csv",
+        "table2.csv",
+        "table2_frames.csv",
+    ];
+    crate::assert_same_bytes(&one, &two, &files, "1 and 2 threads (render source)");
+    let spec = std::fs::read_to_string(one.join("spec.toml")).unwrap();
+    assert!(spec.contains("source = \"render\""), "{spec}");
+    let mesh = run("mesh", "mesh", "2");
+    let read = |d: &std::path::Path| std::fs::read(d.join("reference.csv")).unwrap();
+    assert_ne!(read(&one), read(&mesh), "render and mesh read the same AUs");
+}

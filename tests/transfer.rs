@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use facelab::cohort::{clips, CohortKind, CohortParams, Subject, SubjectParams};
 use facelab::experiments::face::FaceSource;
 use facelab::experiments::observe::model_observer;
+use facelab::experiments::reader::{FaceReader, Source};
 use facelab::experiments::table2::{au_mse, observe_clip, transfer};
 use facelab::io::calibration::{default_calibration_path, read_calibration};
 use facelab::learn::Mlp;
@@ -88,10 +89,12 @@ fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
     p.head_rotation_sd = 0.0;
     let params = SolveParams::default();
     let mut ws = Workspace::new(&subject.model);
+    let mesh_reader = FaceReader::new(Source::Mesh).unwrap();
     let mut reference = Vec::new();
     for clip in clips(&subject, CohortKind::Images, &p, 1) {
         let frames = observe_clip(
             &subject,
+            &mesh_reader,
             &observer,
             CohortKind::Images,
             &clip,
@@ -109,6 +112,7 @@ fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
     let out = transfer(
         model,
         None,
+        &mesh_reader,
         &observer,
         &mlp,
         None,

@@ -117,7 +117,8 @@ impl Default for DatasetParams {
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 
-use crate::observe::{landmarks, Observer, ObserverNoise, AU_COUNT, AU_NAMES};
+use super::reader::FaceReader;
+use crate::observe::{Observer, ObserverNoise, AU_COUNT, AU_NAMES};
 use crate::rng::stream;
 use crate::rng::Stream;
 use crate::sim::basis::LinearBasis;
@@ -150,6 +151,7 @@ pub struct Sample {
 pub fn generate(
     model: &FaceModel,
     weights: &ExpressionWeights,
+    reader: &FaceReader,
     observer: &Observer,
     basis: Option<&LinearBasis>,
     au_controls: &[Vec<usize>],
@@ -189,9 +191,7 @@ pub fn generate(
                 .with_context(|| {
                     format!("dataset sample {e}/{index} (s = {scale:.4}, jaw = {jaw:.4})")
                 })?;
-                let mut aus = observer
-                    .observe(&landmarks(state.surface(model.vertex_count())))?
-                    .aus;
+                let mut aus = observer.observe(&reader.read(model, &state, None)?)?.aus;
                 if !noise.is_off() {
                     noise.apply(&mut aus, &gains, &mut rng);
                 }

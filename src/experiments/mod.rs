@@ -9,6 +9,7 @@ pub mod inversion;
 pub mod observe;
 pub mod photos;
 pub mod reach;
+pub mod reader;
 pub mod realfaces;
 pub mod run;
 pub mod table1;

@@ -16,6 +16,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
+use super::reader::FaceReader;
 use super::table2::{range_map, training_range, transfer, Setting};
 use crate::cache::{self, Cache};
 use crate::io::observer_fit::read_realdata;
@@ -141,6 +142,7 @@ pub struct Inputs<'a> {
     pub training_aus: &'a [[f64; AU_COUNT]],
     pub model: &'a FaceModel,
     pub basis: Option<&'a LinearBasis>,
+    pub reader: &'a FaceReader,
     pub observer: &'a Observer,
 }
 
@@ -235,6 +237,7 @@ pub fn run(
                 let transferred = transfer(
                     inp.model,
                     inp.basis,
+                    inp.reader,
                     inp.observer,
                     mlp,
                     None,

@@ -24,7 +24,7 @@ use super::dataset::{self, Sample, SolveStart};
 use super::face::FaceSource;
 use super::headpose;
 use super::inversion;
-use super::observe::model_observer;
+use super::reader::FaceReader;
 use super::realfaces;
 use super::table1::{self, Network, Row};
 use super::table2;
@@ -352,7 +352,8 @@ fn run_cell(
         None => {
             let model = source.model()?;
             let weights = source.weights()?;
-            let observer = model_observer(&model, spec_calibration(spec)?)?;
+            let reader = FaceReader::new(spec.observer_source)?;
+            let observer = reader.observer(&model, spec_calibration(spec)?)?;
             let basis = load_basis(&k, cache, &model, spec, &mut record)?;
             let total = spec.dataset.pairs_per_expression * 6;
             let progress = bar(total as u64, "dataset");
@@ -360,6 +361,7 @@ fn run_cell(
             let s = dataset::generate(
                 &model,
                 &weights,
+                &reader,
                 &observer,
                 basis.as_ref(),
                 &a.facs.au_controls,
@@ -489,7 +491,8 @@ fn run_cell(
         let files = realfaces::inputs(&spec.realfaces)?;
         let model = source.model()?;
         let basis = load_basis(&k, cache, &model, spec, &mut record)?;
-        let observer = model_observer(&model, calibration.clone())?;
+        let reader = FaceReader::new(spec.observer_source)?;
+        let observer = reader.observer(&model, calibration.clone())?;
         let training: Vec<_> = samples.iter().map(|s| s.aus).collect();
         let inputs = realfaces::Inputs {
             spec,
@@ -505,6 +508,7 @@ fn run_cell(
             training_aus: &training,
             model: &model,
             basis: basis.as_ref(),
+            reader: &reader,
             observer: &observer,
         };
         Some(realfaces::run(&inputs, cache, &mut record, &bar)?)

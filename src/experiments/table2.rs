@@ -14,7 +14,7 @@ use crate::cohort::{clips, Clip, CohortKind, CohortParams, Subject};
 use crate::learn::{Mlp, Normalization, Normalizer, Pairs};
 use crate::observe::au::AU_MAX;
 use crate::observe::HeadPose;
-use crate::observe::{landmarks, Calibration, Observer, ObserverNoise, AU_COUNT, AU_NAMES};
+use crate::observe::{Calibration, Observer, ObserverNoise, AU_COUNT, AU_NAMES};
 use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::controls::{control_names, CONTROL_COUNT, JAW_SLIDE, JAW_TWIST};
@@ -24,7 +24,7 @@ use crate::sim::{
     solve, solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, State, Workspace,
 };
 
-use super::observe::model_observer;
+use super::reader::FaceReader;
 
 /// The paper's 8 AUs of Table 2 (indices into `AU_NAMES`).
 pub const PAPER_AUS: [&str; 8] = [
@@ -139,6 +139,7 @@ pub fn solve_clip(
 /// A subject's clip, solved and observed: the reference frames.
 pub fn observe_clip(
     subject: &Subject,
+    reader: &FaceReader,
     observer: &Observer,
     kind: CohortKind,
     clip: &Clip,
@@ -169,8 +170,7 @@ pub fn observe_clip(
                 roll: head[2],
             }
             .rotation();
-            let turned = landmarks(state.surface(model.vertex_count())).map(|p| r.apply(p));
-            let o = observer.observe(&turned)?;
+            let o = observer.observe(&reader.read(model, state, Some(&r))?)?;
             let mut aus = o.aus;
             if noise_sd > 0.0 {
                 let label = format!("cohort/{}/noise/{}/{name}/{f}", kind.name(), clip.subject);
@@ -199,6 +199,7 @@ pub fn reference(
     face: FaceParams,
     weights: &ExpressionWeights,
     calibration: &Calibration,
+    reader: &FaceReader,
     p: &CohortParams,
     kinds: &[CohortKind],
     params: &SolveParams,
@@ -213,12 +214,12 @@ pub fn reference(
         .map(|&(kind, i)| -> Result<Vec<RefFrame>> {
             let subject = Subject::draw(base, face, weights, &p.subjects, p.seed, kind.name(), i)
                 .with_context(|| format!("cohort {}: subject {i}", kind.name()))?;
-            let observer = model_observer(&subject.model, calibration.clone())?;
+            let observer = reader.observer(&subject.model, calibration.clone())?;
             let mut ws = Workspace::new(&subject.model);
             let mut frames = Vec::new();
             for clip in clips(&subject, kind, p.clip(kind), p.seed) {
                 frames.extend(observe_clip(
-                    &subject, &observer, kind, &clip, p, params, &mut ws,
+                    &subject, reader, &observer, kind, &clip, p, params, &mut ws,
                 )?);
                 tick();
             }
@@ -325,6 +326,7 @@ pub struct Transferred {
 pub fn transfer(
     model: &FaceModel,
     basis: Option<&LinearBasis>,
+    reader: &FaceReader,
     observer: &Observer,
     mlp: &Mlp,
     map: Option<&Normalizer>,
@@ -356,8 +358,7 @@ pub fn transfer(
                     ws,
                     params,
                     |_, state| {
-                        let o =
-                            observer.observe(&landmarks(state.surface(model.vertex_count())))?;
+                        let o = observer.observe(&reader.read(model, state, None)?)?;
                         frames.push(Transferred {
                             activations: *state.activations.values(),
                             aus: o.aus,

@@ -14,7 +14,7 @@ use image::RgbImage;
 
 use super::dataset::Sample;
 use super::face::FaceSource;
-use super::observe::model_observer;
+use super::reader::FaceReader;
 use super::table2::{
     self, clip_count, clip_ranges, range_map, reference, reference_csv, reference_from_csv,
     to_activations, training_range, transfer, transfers_csv, transfers_from_csv, RefFrame, Row,
@@ -89,6 +89,7 @@ pub fn run(
             inp.assets,
             values(&[
                 "cohort.",
+                "observer.source",
                 "dataset.subdivisions",
                 "dataset.tolerance",
                 "dataset.shear_modulus_fraction"
@@ -96,6 +97,7 @@ pub fn run(
         ),
         &[],
     );
+    let reader = FaceReader::new(spec.observer_source)?;
     let t = Instant::now();
     let reference_frames = match cache.get("cohort", &cohort_key)? {
         Some(e) => {
@@ -113,6 +115,7 @@ pub fn run(
                 inp.source.params(),
                 &inp.source.weights()?,
                 inp.calibration,
+                &reader,
                 &spec.cohort,
                 &kinds,
                 &params,
@@ -129,7 +132,7 @@ pub fn run(
         }
     };
 
-    let observer = model_observer(inp.model, inp.calibration.clone())?;
+    let observer = reader.observer(inp.model, inp.calibration.clone())?;
     let training: Vec<[f64; AU_COUNT]> = inp.samples.iter().map(|s| s.aus).collect();
     let target = training_range(spec.table2_normalization, &training);
     let clips = clip_ranges(&reference_frames);
@@ -176,6 +179,7 @@ pub fn run(
                         let t = transfer(
                             inp.model,
                             inp.basis,
+                            &reader,
                             &observer,
                             mlp,
                             map.as_ref(),

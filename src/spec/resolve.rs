@@ -11,6 +11,7 @@ use crate::cohort::{ClipParams, CohortKind, CohortParams, SubjectParams};
 use crate::experiments::dataset::{DatasetParams, Family, SolveStart};
 use crate::experiments::headpose::HeadposeParams;
 use crate::experiments::inversion::InversionParams;
+use crate::experiments::reader::Source;
 use crate::experiments::realfaces::RealfacesParams;
 use crate::io::calibration::DEFAULT_CALIBRATION;
 use crate::learn::params::{ModelParams, Normalization, TrainParams};
@@ -36,6 +37,9 @@ pub struct Spec {
     /// `experiments/au_calibration.csv` (default) or a readout fitted to OpenFace
     /// (`experiments/au_observer_fit.csv`), relative to the repository.
     pub calibration: String,
+    /// Where the observer reads simulated faces from (`observer.source`: "mesh", the
+    /// default, or "render": a picture of the face through the landmarker).
+    pub observer_source: Source,
     pub model: ModelParams,
     pub train: TrainParams,
     /// The reference cohorts (`[cohort]`), used when `tables` has "table2".
@@ -455,6 +459,10 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
     };
     let calibration = r.data_file("observer.calibration", DEFAULT_CALIBRATION)?;
     r.forget_if_unset("observer.calibration");
+    let observer_source =
+        Source::parse(&r.choice("observer.source", Source::default().name(), &Source::NAMES)?)
+            .expect("choice checked");
+    r.forget_if_unset("observer.source");
     let m = ModelParams::default();
     let model = ModelParams {
         layers: r.integer("model.layers", m.layers as i64, 1, 16)? as usize,
@@ -528,6 +536,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         tables,
         dataset,
         observer,
+        observer_source,
         calibration,
         model,
         train,
