@@ -577,6 +577,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     ignore_pose,
                     neck,
                     pictures: None,
+                    openface_bytes: None,
                 },
                 normalize.map(|n| Normalization::parse(&n).expect("clap checked")),
                 neutral.as_deref().map(photo_neutral),

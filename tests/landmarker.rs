@@ -378,6 +378,22 @@ fn a_photo_transfers_with_the_picture_beside_the_face() {
     // The render is the picture (cut to the face) beside the model's face: wider than tall.
     let (w, h) = image::image_dimensions(out.join("frame_00001.png")).unwrap();
     assert!(w > h, "{w}x{h}");
+
+    // A run without a neck controller: the error comes before any work, nothing is written.
+    let bare = crate::temp("landmarker", "transfer-no-neck").join("out");
+    let (ok, _, err) = facelab(&[
+        "transfer",
+        &photo("render_joy"),
+        "--model",
+        root().join("results/realfaces/latest").to_str().unwrap(),
+        "--out",
+        bare.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("voluntary neck controller") && err.contains("--neck"),
+        "{err}"
+    );
+    assert!(!bare.exists(), "nothing written after the error");
 }
 
 /// `observer.source = "render"`: every simulated face is rendered and read through the

@@ -96,7 +96,6 @@ fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
             &subject,
             &mesh_reader,
             &observer,
-            CohortKind::Images,
             &clip,
             &cohort,
             &params,

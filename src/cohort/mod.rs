@@ -396,6 +396,7 @@ pub struct Frame {
 /// One image or video: a subject performing one emotion.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Clip {
+    pub kind: CohortKind,
     pub subject: usize,
     /// `None`: the neutral image.
     pub expression: Option<Expression>,
@@ -449,6 +450,7 @@ pub fn clips(subject: &Subject, kind: CohortKind, p: &ClipParams, seed: u64) -> 
                 })
                 .collect();
             Clip {
+                kind,
                 subject: subject.index,
                 expression: e,
                 peak,

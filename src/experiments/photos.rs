@@ -468,11 +468,14 @@ pub fn landmarks_csv(l: &Landmarked) -> String {
     s
 }
 
-/// What `landmark_input` wrote and found.
+/// What `landmark_input` wrote (or [`landmark_files`] made) and found.
 pub struct LandmarkOutput {
     pub kind: InputKind,
     /// `DIR/openface.csv`.
     pub openface: PathBuf,
+    /// Files written, or to write, under `DIR`: `openface.csv` first, `landmarks.csv` and the
+    /// picture.
+    pub files: Vec<(&'static str, Vec<u8>)>,
     pub written: Vec<PathBuf>,
     /// Frames with a face, and without.
     pub faces: usize,
@@ -488,6 +491,33 @@ pub struct LandmarkOutput {
 /// model's face for one frame, the median for several. Nothing is written when reading or
 /// landmarking fails.
 pub fn landmark_input(
+    input: &Path,
+    out: &Path,
+    model: &FaceModel,
+    calibration: Calibration,
+    neutral: Option<PhotoNeutral>,
+) -> Result<LandmarkOutput> {
+    let mut made = landmark_files(input, out, model, calibration, neutral)?;
+    made.written = write_files(out, &made.files)?;
+    Ok(made)
+}
+
+/// Writes `files` into `out` (created if missing), each atomically; returns their paths.
+pub fn write_files(out: &Path, files: &[(&'static str, Vec<u8>)]) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let mut written = Vec::new();
+    for (file, data) in files {
+        let path = out.join(file);
+        crate::io::atomic::write_atomic(&path, data)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// What [`landmark_input`] writes, made but not written (`written` is empty), so that
+/// `transfer` writes it only when the whole transfer succeeds.
+pub fn landmark_files(
     input: &Path,
     out: &Path,
     model: &FaceModel,
@@ -553,22 +583,16 @@ pub fn landmark_input(
         };
         ("landmarks.gif", gif_bytes(&small, delay)?)
     };
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
-    let mut written = Vec::new();
-    for (file, data) in [
+    let files = vec![
         ("openface.csv", bytes),
         ("landmarks.csv", landmarks_csv(&l).into_bytes()),
-        (preview.0, preview.1),
-    ] {
-        let path = out.join(file);
-        crate::io::atomic::write_atomic(&path, &data)
-            .with_context(|| format!("{}: cannot write", path.display()))?;
-        written.push(path);
-    }
+        preview,
+    ];
     Ok(LandmarkOutput {
         kind,
         openface: out.join("openface.csv"),
-        written,
+        files,
+        written: Vec::new(),
         faces,
         missing: l.found.len() - faces,
         warnings: l.warnings,

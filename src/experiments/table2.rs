@@ -141,13 +141,12 @@ pub fn observe_clip(
     subject: &Subject,
     reader: &FaceReader,
     observer: &Observer,
-    kind: CohortKind,
     clip: &Clip,
     cohort: &CohortParams,
     params: &SolveParams,
     ws: &mut Workspace,
 ) -> Result<Vec<RefFrame>> {
-    let (noise_sd, seed) = (cohort.noise_sd, cohort.seed);
+    let (noise_sd, seed, kind) = (cohort.noise_sd, cohort.seed, clip.kind);
     let model = &subject.model;
     let activations: Vec<Activations> = clip.frames.iter().map(|f| f.activations.clone()).collect();
     let noise = ObserverNoise {
@@ -219,7 +218,7 @@ pub fn reference(
             let mut frames = Vec::new();
             for clip in clips(&subject, kind, p.clip(kind), p.seed) {
                 frames.extend(observe_clip(
-                    &subject, reader, &observer, kind, &clip, p, params, &mut ws,
+                    &subject, reader, &observer, &clip, p, params, &mut ws,
                 )?);
                 tick();
             }

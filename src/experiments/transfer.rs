@@ -16,7 +16,7 @@ use super::headpose::{face_motion, posed_face, Learned};
 use super::observe::model_observer;
 use super::table2::{au_mse, predict_activations, solve_clip};
 use crate::io::atomic::write_atomic;
-use crate::io::openface::{read_openface, write_openface, FaceRow};
+use crate::io::openface::{parse_openface, read_openface, write_openface, FaceRow};
 use crate::learn::{Mlp, Normalization, Normalizer};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{gif_bytes, side_by_side};
@@ -43,6 +43,9 @@ pub struct TransferOptions {
     /// The input's pictures (photos or video frames with their landmarks drawn), indexed by
     /// the file's `frame` - 1: renders and the GIF then show each beside the model's face.
     pub pictures: Option<Vec<RgbImage>>,
+    /// The OpenFace file's bytes when it is not on disk yet (the landmarker's, written
+    /// beside the outputs only once the transfer succeeds); `openface` names it.
+    pub openface_bytes: Option<Vec<u8>>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -142,7 +145,10 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     }
     let spec = run_spec(run)?;
 
-    let file = read_openface(&opts.openface)?;
+    let file = match &opts.openface_bytes {
+        Some(bytes) => parse_openface(bytes.clone(), &opts.openface)?,
+        None => read_openface(&opts.openface)?,
+    };
     if file.rows.is_empty() {
         bail!(
             "{}: no row with success = 1 ({} skipped)",
@@ -354,11 +360,7 @@ fn drive_neck(
     rows: &[FaceRow],
     dt: f64,
 ) -> Result<HeadTrack> {
-    let (run, neck) = match &opts.neck {
-        Some(dir) => (dir, run_spec(dir)?.headpose.neck()),
-        None => (&opts.model, spec.headpose.neck()),
-    };
-    let weights = run.join("voluntary.safetensors");
+    let (weights, neck) = neck_run(opts, spec)?;
     let bytes = std::fs::read(&weights).with_context(|| {
         format!(
             "{}: the input has head pose (pose_Rx, pose_Ry, pose_Rz) but the run has no \
@@ -421,6 +423,24 @@ fn drive_neck(
     })
 }
 
+/// The voluntary controller's weights and the neck it was trained on: `opts.neck`'s run, else
+/// the face's (whose spec is `spec`).
+fn neck_run(
+    opts: &TransferOptions,
+    spec: &crate::spec::Spec,
+) -> Result<(PathBuf, crate::sim::neck::Neck)> {
+    Ok(match &opts.neck {
+        Some(dir) => (
+            dir.join("voluntary.safetensors"),
+            run_spec(dir)?.headpose.neck(),
+        ),
+        None => (
+            opts.model.join("voluntary.safetensors"),
+            spec.headpose.neck(),
+        ),
+    })
+}
+
 /// `facelab transfer PATH`: an OpenFace CSV goes straight to [`transfer_openface`]
 /// (normalization `normalize`, default min-max); a photo, folder, GIF or video first goes
 /// through the built-in landmarker ([`super::photos::landmark_input`]), which writes
@@ -433,7 +453,7 @@ pub fn transfer_path(
     normalize: Option<Normalization>,
     neutral: Option<super::photos::PhotoNeutral>,
 ) -> Result<(TransferSummary, Option<super::photos::LandmarkOutput>)> {
-    use super::photos::{input_kind, landmark_input, InputKind};
+    use super::photos::{input_kind, landmark_files, write_files, InputKind};
     if input_kind(input)? == InputKind::OpenFace {
         let opts = TransferOptions {
             openface: input.to_path_buf(),
@@ -443,16 +463,30 @@ pub fn transfer_path(
         return Ok((transfer_openface(&opts)?, None));
     }
     let spec = run_spec(&opts.model)?;
+    // Pictures always have a head pose: without a controller, say so before any work.
+    if !opts.ignore_pose {
+        let (weights, _) = neck_run(opts, &spec)?;
+        if !weights.is_file() {
+            bail!(
+                "{}: a picture's head pose drives the neck, but the run has no voluntary neck \
+                 controller (pass --neck with a run of a spec whose tables list \"headpose\", \
+                 e.g. results/headpose/latest, or pass --ignore-pose)",
+                weights.display()
+            );
+        }
+    }
     let model = FaceSource::of_spec(&spec).model()?;
     let calibration = super::run::spec_calibration(&spec)?;
-    let landmarked = landmark_input(input, &opts.out, &model, calibration, neutral)?;
+    let mut landmarked = landmark_files(input, &opts.out, &model, calibration, neutral)?;
     let opts = TransferOptions {
         openface: landmarked.openface.clone(),
+        openface_bytes: Some(landmarked.files[0].1.clone()),
         normalize: normalize.unwrap_or(Normalization::None),
         pictures: Some(landmarked.pictures.clone()),
         ..opts.clone()
     };
     let mut summary = transfer_openface(&opts)?;
+    landmarked.written = write_files(&opts.out, &landmarked.files)?;
     let mut written = landmarked.written.clone();
     written.append(&mut summary.written);
     summary.written = written;
