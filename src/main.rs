@@ -8,7 +8,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 
 use anyhow::Context;
 use facelab::experiments::bench::{
-    bench_neck, bench_observe, bench_solve, bench_train, bench_transfer,
+    bench_landmark, bench_neck, bench_observe, bench_solve, bench_train, bench_transfer,
 };
 use facelab::experiments::face::{gallery, parse_assignments, render_to, FaceSource, PoseRequest};
 use facelab::experiments::observe;
@@ -212,8 +212,8 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
-    /// Transfer the expressions of an OpenFace CSV (its AUxx_r columns) onto the model
-    /// through a run's unified network.
+    /// Transfer the expressions of a photo, a folder of frames, a GIF, a video or an OpenFace
+    /// CSV (its AUxx_r columns) onto the model through a run's unified network.
     Transfer {
         /// A photo (PNG, JPEG), a folder of frames, an animated GIF, a video (via ffmpeg) or an
         /// OpenFace 2.x CSV; the kind is told from the content
@@ -703,11 +703,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 threads,
             } => {
                 set_threads(Some(threads))?;
-                facelab::experiments::bench::bench_landmark(
-                    frames,
-                    seconds,
-                    &mut std::io::stdout().lock(),
-                )?
+                bench_landmark(frames, seconds, &mut std::io::stdout().lock())?
             }
             Bench::Train {
                 pairs,
