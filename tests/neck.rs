@@ -219,3 +219,34 @@ fn transfer_of_pose_without_a_neck_controller_says_where_one_is() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(dir.join("out/head_pose.csv").exists());
 }
+
+#[test]
+fn a_still_reaches_its_head_pose() {
+    // One row, as a photo gives: the neck holds the pose until the head settles, where one
+    // video frame (1/30 s) would leave it near upright.
+    let dir = temp("still");
+    let pose = [
+        "pose_Tx", "pose_Ty", "pose_Tz", "pose_Rx", "pose_Ry", "pose_Rz",
+    ];
+    let row = Frame {
+        success: true,
+        extra: ["0.0", "0.0", "500.0", "0.0", "0.3", "0.0"]
+            .map(String::from)
+            .to_vec(),
+        aus: [0.05; AU_COUNT],
+    };
+    let input = openface_file(&dir, "still.csv", &pose, &[row]);
+    let (paper, neck) = committed();
+    let o = transfer(&input, &paper, Some(&neck), &dir.join("out"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let head = std::fs::read_to_string(dir.join("out/head_pose.csv")).unwrap();
+    let last: Vec<f64> = head
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(|c| c.parse().unwrap())
+        .collect();
+    assert_eq!(last[2], 0.3, "{head}");
+    assert!((last[5] - 0.3).abs() < 0.02, "{head}");
+}

@@ -404,6 +404,15 @@ fn drive_neck(
     }
     // Sampled at 400 Hz; each frame takes the nearest sample.
     let every = 10;
+    if rows.len() == 1 {
+        let (pose, offset) = hold_still(&neck, &mlp, &targets, every)
+            .with_context(|| format!("{}: driving the neck", opts.openface.display()))?;
+        return Ok(HeadTrack {
+            target: targets.poses.clone(),
+            pose: vec![pose],
+            offset: vec![offset],
+        });
+    }
     let duration = rows.len() as f64 * dt;
     let run = simulate(
         &neck,
@@ -421,6 +430,49 @@ fn drive_neck(
         pose: (0..rows.len()).map(|i| run.pose[pick(i)]).collect(),
         offset: (0..rows.len()).map(|i| run.skull_offset[pick(i)]).collect(),
     })
+}
+
+/// How long a still is held per step while the head settles, and when it has settled: the
+/// head turns less than [`STILL_SETTLED_DEG`] over one step. At most [`STILL_MAX_STEPS`] steps.
+const STILL_STEP_S: f64 = 0.5;
+const STILL_SETTLED_DEG: f64 = 0.05;
+const STILL_MAX_STEPS: usize = 12;
+
+/// A photo's head pose: the neck holds the one target from the upright rest posture until the
+/// head settles (a video frame lasts 1/30 s, far too short to reach a still's pose). Returns
+/// the settled pose and skull offset; an error if the head still moves after 6 s.
+fn hold_still(
+    neck: &crate::sim::neck::Neck,
+    mlp: &Mlp,
+    target: &PoseSequence,
+    every: usize,
+) -> Result<(HeadPose, crate::sim::geom::V3)> {
+    let mut state = BodyState::rest();
+    let mut last: Option<HeadPose> = None;
+    for _ in 0..STILL_MAX_STEPS {
+        let run = simulate(
+            neck,
+            &mut Learned { mlp },
+            target,
+            state,
+            STILL_STEP_S,
+            every,
+        )?;
+        let (pose, offset) = (
+            *run.pose.last().context("an empty neck run")?,
+            *run.skull_offset.last().context("an empty neck run")?,
+        );
+        if last.is_some_and(|p| p.error_degrees(pose) < STILL_SETTLED_DEG) {
+            return Ok((pose, offset));
+        }
+        last = Some(pose);
+        state = run.final_state;
+    }
+    bail!(
+        "the head did not settle on the still's pose: it still turns {STILL_SETTLED_DEG} deg or \
+         more per {STILL_STEP_S} s after {} s",
+        STILL_STEP_S * STILL_MAX_STEPS as f64
+    )
 }
 
 /// The voluntary controller's weights and the neck it was trained on: `opts.neck`'s run, else
