@@ -91,6 +91,11 @@ fn spec_errors_name_file_line_column_and_key() {
             && e.contains("no such file"),
         "{e}"
     );
+    let e = spec_error("[table2]\nopenface = \"nope.csv\"\n", &[]);
+    assert!(
+        e.contains("s.toml:2:1") && e.contains("table2.openface") && e.contains("no such file"),
+        "{e}"
+    );
     let e = spec_error("[realfaces]\nframe_stride = 0\n", &[]);
     assert!(
         e.contains("realfaces.frame_stride") && e.contains("outside"),
@@ -129,13 +134,25 @@ fn later_keys_change_nothing_for_specs_that_do_not_set_them() {
     for name in ["paper", "table1", "smoke"] {
         let cells = spec::load(&root().join(format!("experiments/{name}.toml")), &[]).unwrap();
         let keys: Vec<&String> = cells[0].spec.values.keys().collect();
-        for later in ["dataset.family", "observer.calibration", "realfaces."] {
+        for later in ["dataset.family", "realfaces."] {
             assert!(
                 !keys.iter().any(|k| k.starts_with(later)),
                 "{name}.toml records {later}"
             );
         }
     }
+    // The smoke spec sets none of the later keys; the paper's specs read every face with the
+    // readout fitted to OpenFace, and Table 2 adds the committed real file.
+    let smoke = &spec::load(&root().join("experiments/smoke.toml"), &[]).unwrap()[0].spec;
+    assert!(!smoke.values.contains_key("observer.calibration"));
+    assert!(!smoke.values.contains_key("table2.openface"));
+    assert_eq!(smoke.table2_openface, None);
+    let paper = &spec::load(&root().join("experiments/paper.toml"), &[]).unwrap()[0].spec;
+    assert_eq!(paper.calibration, "experiments/au_observer_fit.csv");
+    assert_eq!(
+        paper.table2_openface.as_deref(),
+        Some("assets/openface/py-feat/OpenFace_Test.csv")
+    );
     let cells = spec::load(&root().join("experiments/realfaces.toml"), &[]).unwrap();
     let s = &cells[0].spec;
     assert_eq!(
@@ -149,6 +166,42 @@ fn later_keys_change_nothing_for_specs_that_do_not_set_them() {
     assert_eq!(
         names,
         ["dataset.family=\"paper\"", "dataset.family=\"broad\""]
+    );
+}
+
+/// Table 2's real rows: the committed py-feat file through each seed's network, unnormalized
+/// and normalized, in the markdown table and per seed in `table2_real.csv`.
+#[test]
+fn table2_reports_the_committed_real_file_per_seed_and_setting() {
+    let dir = temp("table2-real");
+    let out = run_smoke(
+        &dir.join("results"),
+        &[
+            "--set",
+            "table2.openface=\"assets/openface/py-feat/OpenFace_Test.csv\"",
+            "--set",
+            "realfaces.frame_stride=20",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = String::from_utf8(latest(&dir.join("results"), "table2_real.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    // 2 seeds x 2 settings, each over every 20th of the file's 99 used frames (5).
+    assert_eq!(rows.len(), 4, "{csv}");
+    for r in &rows {
+        assert!(r.contains("py-feat"), "{r}");
+    }
+    let md = std::fs::read_to_string(dir.join("paper-tables/smoke_table2.md")).unwrap();
+    for name in ["| py-feat-unnormalized |", "| py-feat-normalized |"] {
+        assert!(md.contains(name), "{md}");
+    }
+    assert!(
+        md.contains("assets/openface/py-feat/OpenFace_Test.csv") && md.contains("5 frames"),
+        "{md}"
     );
 }
 

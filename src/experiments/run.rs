@@ -277,6 +277,8 @@ struct CellResult {
     table2: Option<Table2Result>,
     inversion: Option<inversion::Output>,
     realfaces: Option<Vec<realfaces::FileRow>>,
+    /// Table 2's committed real file (`table2.openface`) through each seed's network.
+    table2_real: Option<Vec<realfaces::FileRow>>,
     /// The first seed's unified network (safetensors) and the training AUs' per-AU
     /// statistics, for `facelab transfer --model`.
     unified: Vec<u8>,
@@ -487,8 +489,9 @@ fn run_cell(
     } else {
         None
     };
-    let realfaces_rows = if spec.tables.iter().any(|t| t == "realfaces") {
-        let files = realfaces::inputs(&spec.realfaces)?;
+    // Real OpenFace files through every seed's unified network: the real-data table's files,
+    // and the committed file Table 2 reports beside its cohorts.
+    let mut real_rows = |files: &[realfaces::RealInput]| -> Result<Vec<realfaces::FileRow>> {
         let model = source.model()?;
         let basis = load_basis(&k, cache, &model, spec, &mut record)?;
         let reader = FaceReader::new(spec.observer_source)?;
@@ -496,7 +499,7 @@ fn run_cell(
         let training: Vec<_> = samples.iter().map(|s| s.aus).collect();
         let inputs = realfaces::Inputs {
             spec,
-            files: &files,
+            files,
             dataset_key: &k.dataset,
             basis_key: k.basis.as_deref(),
             unified: k
@@ -511,7 +514,17 @@ fn run_cell(
             reader: &reader,
             observer: &observer,
         };
-        Some(realfaces::run(&inputs, cache, &mut record, &bar)?)
+        realfaces::run(&inputs, cache, &mut record, &bar)
+    };
+    let table2_real = match (&table2, &spec.table2_openface) {
+        (Some(_), Some(file)) => Some(
+            real_rows(&[realfaces::committed_input(file)])
+                .with_context(|| format!("Table 2's real file {file}"))?,
+        ),
+        _ => None,
+    };
+    let realfaces_rows = if spec.tables.iter().any(|t| t == "realfaces") {
+        Some(real_rows(&realfaces::inputs(&spec.realfaces)?)?)
     } else {
         None
     };
@@ -532,6 +545,7 @@ fn run_cell(
         table2,
         inversion: inversion_out,
         realfaces: realfaces_rows,
+        table2_real,
         unified,
         training_aus: training_aus_csv(&samples),
         curves,
@@ -1019,16 +1033,24 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 table2_stage::frames_csv(&t2.reference, &t2.first).into_bytes(),
                 &mut outputs,
             )?;
+            let real = result.table2_real.as_deref().unwrap_or(&[]);
+            if let Some(rows) = &result.table2_real {
+                write(
+                    format!("{prefix}table2_real.csv"),
+                    realfaces::csv(rows).into_bytes(),
+                    &mut outputs,
+                )?;
+            }
             if cells.len() == 1 {
                 let report = &cell.spec.report_prefix;
                 let tables = out_root.join("paper-tables");
                 write_atomic(
                     &tables.join(format!("{report}table2.md")),
-                    table2_stage::markdown(&t2.rows, &cell.spec, &t2.reference).as_bytes(),
+                    table2_stage::markdown(&t2.rows, &cell.spec, &t2.reference, real).as_bytes(),
                 )?;
                 write_atomic(
                     &tables.join(format!("{report}table2.tex")),
-                    table2_stage::tex(&t2.rows).as_bytes(),
+                    table2_stage::tex(&t2.rows, real).as_bytes(),
                 )?;
                 let figures = out_root.join("figures").join(format!("{report}table2"));
                 for (name, bytes) in &t2.renders {

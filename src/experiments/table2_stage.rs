@@ -15,6 +15,7 @@ use image::RgbImage;
 use super::dataset::Sample;
 use super::face::FaceSource;
 use super::reader::FaceReader;
+use super::realfaces::FileRow;
 use super::table2::{
     self, clip_count, clip_ranges, range_map, reference, reference_csv, reference_from_csv,
     to_activations, training_range, transfer, transfers_csv, transfers_from_csv, RefFrame, Row,
@@ -440,27 +441,58 @@ struct Summary {
     ci: Vec<f64>,
 }
 
+/// Mean and 95% interval over seeds of each of the 17 AUs' MSE and of their mean, from one
+/// table row's per-seed MSEs.
+fn over_seeds(per_seed: &[&[f64; AU_COUNT]]) -> (Vec<f64>, Vec<f64>) {
+    let col = |j: usize| -> Vec<f64> {
+        per_seed
+            .iter()
+            .map(|m| {
+                if j < AU_COUNT {
+                    m[j]
+                } else {
+                    m.iter().sum::<f64>() / AU_COUNT as f64
+                }
+            })
+            .collect()
+    };
+    (
+        (0..=AU_COUNT).map(|j| stats::mean(&col(j))).collect(),
+        (0..=AU_COUNT).map(|j| stats::ci95(&col(j))).collect(),
+    )
+}
+
 /// Mean and 95% interval over seeds of each AU's MSE and of the mean, per table row.
 fn summary(rows: &[Row]) -> Vec<Summary> {
     order()
         .into_iter()
         .map(|(k, s)| {
-            let mine: Vec<&Row> = rows
+            let mine: Vec<&[f64; AU_COUNT]> = rows
                 .iter()
                 .filter(|r| r.cohort == k && r.setting == s)
+                .map(|r| &r.mse)
                 .collect();
-            let col = |j: usize| -> Vec<f64> {
-                mine.iter()
-                    .map(|r| if j < AU_COUNT { r.mse[j] } else { r.mean() })
-                    .collect()
-            };
-            let mean = (0..=AU_COUNT).map(|j| stats::mean(&col(j))).collect();
-            let ci = (0..=AU_COUNT).map(|j| stats::ci95(&col(j))).collect();
+            let (mean, ci) = over_seeds(&mine);
             Summary {
                 key: (k, s),
                 mean,
                 ci,
             }
+        })
+        .collect()
+}
+
+/// The real file's rows (`table2.openface`), unnormalized then normalized: (row name, mean,
+/// interval) over seeds.
+fn real_summary(real: &[FileRow]) -> Vec<(String, Vec<f64>, Vec<f64>)> {
+    Setting::ALL
+        .iter()
+        .filter_map(|&s| {
+            let mine: Vec<&FileRow> = real.iter().filter(|r| r.setting == s).collect();
+            let first = mine.first()?;
+            let mses: Vec<&[f64; AU_COUNT]> = mine.iter().map(|r| &r.mse).collect();
+            let (mean, ci) = over_seeds(&mses);
+            Some((format!("{}-{}", first.person, s.name()), mean, ci))
         })
         .collect()
 }
@@ -510,7 +542,9 @@ fn paper_row(k: CohortKind, s: Setting) -> Option<usize> {
     }
 }
 
-pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame]) -> String {
+/// Table 2 in markdown: the cohorts' rows with the paper's under them, then the real file's
+/// rows (`real`, from `table2.openface`) when the spec names one.
+pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame], real: &[FileRow]) -> String {
     let seeds = spec.seeds.len();
     let count = |k: CohortKind| frames.iter().filter(|f| f.cohort == k).count();
     let c = &spec.cohort;
@@ -543,12 +577,7 @@ pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame]) -> String {
         table2::PAPER_AUS.join(" | "),
         "---|".repeat(aus.len())
     ));
-    for Summary {
-        key: (k, s),
-        mean,
-        ci,
-    } in summary(rows)
-    {
+    let line = |name: &str, mean: &[f64], ci: &[f64]| {
         let cell = |j: usize| {
             if seeds > 1 {
                 format!("{:.3} ± {:.3}", mean[j], ci[j])
@@ -556,12 +585,19 @@ pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame]) -> String {
                 format!("{:.3}", mean[j])
             }
         };
-        out.push_str(&format!(
-            "| {} | {} | {} |\n",
-            row_name(k, s),
+        format!(
+            "| {name} | {} | {} |\n",
             aus.iter().map(|&j| cell(j)).collect::<Vec<_>>().join(" | "),
             cell(AU_COUNT)
-        ));
+        )
+    };
+    for Summary {
+        key: (k, s),
+        mean,
+        ci,
+    } in summary(rows)
+    {
+        out.push_str(&line(&row_name(k, s), &mean, &ci));
         if let Some(p) = paper_row(k, s) {
             let (name, v, m) = &table2::PAPER[p];
             out.push_str(&format!(
@@ -573,13 +609,31 @@ pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame]) -> String {
             ));
         }
     }
+    for (name, mean, ci) in real_summary(real) {
+        out.push_str(&line(&name, &mean, &ci));
+    }
+    if let (Some(file), Some(first)) = (&spec.table2_openface, real.first()) {
+        out.push_str(&format!(
+            "\nReal file: `{file}` ({} frames; {} rows with success = 0 skipped), a real \
+             person's OpenFace output transferred through each seed's unified network. Its \
+             rows compare OpenFace's AUs in the file with the observer's reading of the \
+             transferred face (observer `{}`; with `experiments/au_observer_fit.csv`, the \
+             readout fitted to OpenFace, both sides are on OpenFace's scale). Normalized = each \
+             AU mapped ({}) across the file's frames onto the training range. Per seed: \
+             `results/<experiment>/latest/table2_real.csv`.\n",
+            first.frames,
+            first.skipped,
+            spec.calibration,
+            spec.table2_normalization.name()
+        ));
+    }
     out.push_str(
         "\nAll 17 AUs per seed, with means and intervals: `results/<experiment>/latest/table2.csv`.\n",
     );
     out
 }
 
-pub fn tex(rows: &[Row]) -> String {
+pub fn tex(rows: &[Row], real: &[FileRow]) -> String {
     let aus = paper_aus();
     let mut out = String::from(
         "% Table 2: AU MSE of transferred expressions (facelab; paper rows in italics)\n",
@@ -616,6 +670,16 @@ pub fn tex(rows: &[Row]) -> String {
                     .join(" & ")
             ));
         }
+    }
+    for (name, mean, _) in real_summary(real) {
+        out.push_str(&format!(
+            "{name} & {} & {:.3} \\\\\n",
+            aus.iter()
+                .map(|&j| format!("{:.3}", mean[j]))
+                .collect::<Vec<_>>()
+                .join(" & "),
+            mean[AU_COUNT]
+        ));
     }
     out.push_str("\\hline\n\\end{tabular}\n");
     out

@@ -361,12 +361,10 @@ fn drive_neck(
     dt: f64,
 ) -> Result<HeadTrack> {
     let (weights, neck) = neck_run(opts, spec)?;
-    let bytes = std::fs::read(&weights).with_context(|| {
-        format!(
-            "{}: the input has head pose (pose_Rx, pose_Ry, pose_Rz) but the run has no \
-             voluntary neck controller (pass --neck with a run of a spec whose tables list \
-             \"headpose\", e.g. results/headpose/latest, or pass --ignore-pose)",
-            weights.display()
+    let bytes = std::fs::read(&weights).map_err(|_| {
+        no_neck_controller(
+            &weights,
+            "the input has head pose (pose_Rx, pose_Ry, pose_Rz)",
         )
     })?;
     let mlp = Mlp::from_safetensors(&bytes).with_context(|| format!("{}", weights.display()))?;
@@ -475,22 +473,36 @@ fn hold_still(
     )
 }
 
+/// The voluntary controller's weights: `opts.neck`'s run, else the face's.
+fn neck_weights(opts: &TransferOptions) -> PathBuf {
+    opts.neck
+        .as_ref()
+        .unwrap_or(&opts.model)
+        .join("voluntary.safetensors")
+}
+
 /// The voluntary controller's weights and the neck it was trained on: `opts.neck`'s run, else
 /// the face's (whose spec is `spec`).
 fn neck_run(
     opts: &TransferOptions,
     spec: &crate::spec::Spec,
 ) -> Result<(PathBuf, crate::sim::neck::Neck)> {
-    Ok(match &opts.neck {
-        Some(dir) => (
-            dir.join("voluntary.safetensors"),
-            run_spec(dir)?.headpose.neck(),
-        ),
-        None => (
-            opts.model.join("voluntary.safetensors"),
-            spec.headpose.neck(),
-        ),
-    })
+    let neck = match &opts.neck {
+        Some(dir) => run_spec(dir)?.headpose.neck(),
+        None => spec.headpose.neck(),
+    };
+    Ok((neck_weights(opts), neck))
+}
+
+/// The error for a head pose to follow without a voluntary controller at `weights`; `why` says
+/// where the pose comes from.
+fn no_neck_controller(weights: &Path, why: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{}: {why}, but the run has no voluntary neck controller (pass --neck with a run of a \
+         spec whose tables list \"headpose\", e.g. results/headpose/latest, or pass \
+         --ignore-pose)",
+        weights.display()
+    )
 }
 
 /// `facelab transfer PATH`: an OpenFace CSV goes straight to [`transfer_openface`]
@@ -517,14 +529,12 @@ pub fn transfer_path(
     let spec = run_spec(&opts.model)?;
     // Pictures always have a head pose: without a controller, say so before any work.
     if !opts.ignore_pose {
-        let (weights, _) = neck_run(opts, &spec)?;
+        let weights = neck_weights(opts);
         if !weights.is_file() {
-            bail!(
-                "{}: a picture's head pose drives the neck, but the run has no voluntary neck \
-                 controller (pass --neck with a run of a spec whose tables list \"headpose\", \
-                 e.g. results/headpose/latest, or pass --ignore-pose)",
-                weights.display()
-            );
+            return Err(no_neck_controller(
+                &weights,
+                "a picture's head pose drives the neck",
+            ));
         }
     }
     let model = FaceSource::of_spec(&spec).model()?;

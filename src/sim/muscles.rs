@@ -270,21 +270,26 @@ pub const MUSCLE_PAIRS: [MusclePair; 26] = [
         40,
         0.8,
     ),
-    // Mouth corner (modiolus).
+    // Mouth corner (modiolus). Zygomaticus major runs from the zygomatic bone, 1 cm lateral
+    // and 0.5 cm below the skull under vertex 123, to the modiolus 6.5 mm lateral of the
+    // corner (vertex 57): with levator anguli oris the corners go up and out at about 50
+    // degrees and widen the mouth by 13.8 mm, as real maximal smiles do (130% of rest,
+    // Rigsbee 1988; `experiments/au_reach.csv` row AU12_width). From the skull under 123
+    // straight to the corner, they went up and back and widened it by 6.8 mm.
     linear(
         "zygomaticus_major",
         12,
-        21.6,
+        28.0,
         123,
-        NONE,
+        [-0.01, -0.005, 0.0],
         Bone::Skull,
-        61,
-        1.1,
+        57,
+        1.4,
     ),
     linear(
         "levator_anguli_oris",
         12,
-        8.1,
+        5.0,
         36,
         NONE,
         Bone::Skull,

@@ -47,6 +47,9 @@ pub struct Spec {
     /// How Table 2's normalized rows map reference AUs into the training range
     /// (`table2.normalization`: "minmax" or "zscore"; default "minmax").
     pub table2_normalization: Normalization,
+    /// A committed real OpenFace file whose transfer Table 2 reports beside the cohorts
+    /// (`table2.openface`, relative to the repository; unset: none).
+    pub table2_openface: Option<String>,
     /// The inversion table (`[inversion]`), used when `tables` has "inversion".
     pub inversion: InversionParams,
     /// The head-neck experiment (`[headpose]`), used when `tables` has "headpose".
@@ -506,6 +509,10 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
     let table2_normalization =
         Normalization::parse(&r.choice("table2.normalization", "minmax", &["minmax", "zscore"])?)
             .expect("choice checked");
+    let table2_openface = match r.get("table2.openface") {
+        None => None,
+        Some(_) => Some(r.data_file("table2.openface", "")?),
+    };
     let report_prefix = match r.get("report.prefix") {
         None => String::new(),
         Some(node) => match &node.value {
@@ -542,6 +549,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         train,
         cohort,
         table2_normalization,
+        table2_openface,
         inversion,
         headpose,
         realfaces,
