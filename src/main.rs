@@ -585,6 +585,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if let Some(l) = &landmarked {
                 print_landmarked(l);
             }
+            if !summary.flat.is_empty() {
+                let names: Vec<&str> = summary.flat.iter().map(|&k| AU_NAMES[k]).collect();
+                println!(
+                    "normalization: {} of {} AUs barely vary across the {} frame(s) (spread < \
+                     {} AU) and keep their own reading: {}",
+                    names.len(),
+                    AU_NAMES.len(),
+                    summary.rows,
+                    facelab::experiments::table2::FLAT_SPREAD,
+                    names.join(" ")
+                );
+            }
             if let Some((rms, max)) = summary.pose_error {
                 println!("head pose through the neck: RMS error {rms:.2} deg, max {max:.2} deg");
             }

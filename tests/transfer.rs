@@ -8,8 +8,9 @@ use facelab::experiments::face::FaceSource;
 use facelab::experiments::observe::model_observer;
 use facelab::experiments::reader::{FaceReader, Source};
 use facelab::experiments::table2::{au_mse, observe_clip, transfer};
-use facelab::io::calibration::{default_calibration_path, read_calibration};
+use facelab::io::observer_fit::read_any_calibration;
 use facelab::learn::Mlp;
+use facelab::observe::Calibration;
 use facelab::observe::AU_COUNT;
 use facelab::sim::{SolveParams, Workspace};
 
@@ -22,6 +23,17 @@ fn temp(name: &str) -> PathBuf {
 /// The committed paper run (its unified network and training statistics).
 fn paper_run() -> PathBuf {
     root().join("results/paper/latest")
+}
+
+/// The paper run's observer: the readout fitted to OpenFace, as its `spec.toml` says.
+fn paper_calibration() -> Calibration {
+    let spec = std::fs::read_to_string(paper_run().join("spec.toml")).unwrap();
+    let file = "experiments/au_observer_fit.csv";
+    assert!(
+        spec.contains(&format!("calibration = \"{file}\"")),
+        "{spec}"
+    );
+    read_any_calibration(&root().join(file)).unwrap()
 }
 
 fn identical() -> SubjectParams {
@@ -76,9 +88,7 @@ fn subjects_differ_from_the_base_face_but_keep_its_topology() {
 fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
     let source = FaceSource::default();
     let (mesh, weights) = (source.mesh().unwrap(), source.weights().unwrap());
-    let calibration = read_calibration(&default_calibration_path())
-        .unwrap()
-        .calibration();
+    let calibration = paper_calibration();
     let subject = Subject::draw(&mesh, source.params(), &weights, &identical(), 1, "t", 0).unwrap();
     let observer = model_observer(&subject.model, calibration).unwrap();
     let cohort = CohortParams {
@@ -139,8 +149,7 @@ fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
 /// family that covers real faces is a later issue's.
 fn joy_file(dir: &Path, frames: usize) -> PathBuf {
     let model = crate::model();
-    let table = read_calibration(&default_calibration_path()).unwrap();
-    let observer = model_observer(model, table.calibration()).unwrap();
+    let observer = model_observer(model, paper_calibration()).unwrap();
     let weights = FaceSource::default().weights().unwrap();
     let joy = facelab::experiments::observe::observe_activations(
         model,
@@ -221,6 +230,54 @@ fn transfer_command_writes_every_output_for_a_video() {
         line.split(',').nth(k).unwrap().parse().unwrap()
     };
     assert!(au12(lines[5]) > au12(lines[1]) + 0.5, "{transferred}");
+}
+
+/// A single image (one row) with the default min-max normalization: its AUs have no range to
+/// stretch, so they keep their reading and the face smiles (it came out neutral when one
+/// row's zero range mapped every AU onto the training minimum).
+#[test]
+fn a_one_row_smile_transfers_to_a_smile() {
+    let dir = temp("one-row");
+    let joy = joy_file(&dir, 3);
+    let text = std::fs::read_to_string(&joy).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let last = lines.last().unwrap();
+    let input = dir.join("one.csv");
+    std::fs::write(&input, format!("{header}\n{last}\n")).unwrap();
+    let k = header.split(", ").position(|c| c == "AU12_r").unwrap();
+    let au12_in: f64 = last.split(", ").nth(k).unwrap().trim().parse().unwrap();
+    assert!(au12_in > 1.0, "{last}");
+    let out = dir.join("out");
+    let o = facelab(&[
+        "transfer",
+        "--openface",
+        input.to_str().unwrap(),
+        "--model",
+        &paper_run().display().to_string(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("17 of 17 AUs barely vary"), "{stdout}");
+    let transferred = std::fs::read_to_string(out.join("transferred.csv")).unwrap();
+    let rows: Vec<&str> = transferred.lines().collect();
+    let j = rows[0].split(',').position(|c| c == "AU12_r").unwrap();
+    let au12_out: f64 = rows[1].split(',').nth(j).unwrap().parse().unwrap();
+    assert!(
+        (au12_out - au12_in).abs() < 0.5 * au12_in,
+        "AU12 {au12_in} in, {au12_out} out"
+    );
+    let acts = std::fs::read_to_string(out.join("activations.csv")).unwrap();
+    let names: Vec<&str> = acts.lines().next().unwrap().split(',').collect();
+    let values: Vec<&str> = acts.lines().nth(1).unwrap().split(',').collect();
+    let zm = names
+        .iter()
+        .position(|n| *n == "zygomaticus_major_left")
+        .unwrap();
+    let zm: f64 = values[zm].parse().unwrap();
+    assert!(zm > 0.3, "zygomaticus major at {zm}");
 }
 
 #[test]

@@ -262,15 +262,49 @@ fn pairs_of(rows: &[[f64; AU_COUNT]]) -> Pairs {
     }
 }
 
+/// Below this spread (range for min-max, SD for z-score; AU intensity on the 0-5 scale) an AU
+/// carries no range to normalize: a single image, or an AU that barely moves in a clip.
+pub const FLAT_SPREAD: f64 = 0.1;
+
+/// The AUs whose spread across `input` is below [`FLAT_SPREAD`] (all of them for one row).
+pub fn flat_aus(kind: Normalization, input: &[[f64; AU_COUNT]]) -> Vec<usize> {
+    if kind == Normalization::None {
+        return Vec::new();
+    }
+    (0..AU_COUNT)
+        .filter(|&k| {
+            let col = || input.iter().map(|r| r[k]);
+            let spread = match kind {
+                Normalization::MinMax => {
+                    col().fold(f64::NEG_INFINITY, f64::max) - col().fold(f64::INFINITY, f64::min)
+                }
+                _ => {
+                    let n = input.len().max(1) as f64;
+                    let mean = col().sum::<f64>() / n;
+                    (col().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt()
+                }
+            };
+            spread.is_nan() || spread < FLAT_SPREAD
+        })
+        .collect()
+}
+
 /// The per-AU affine map that takes `input`'s range (min-max) or mean and SD (z-score) onto
-/// `target`'s: `x -> (x - offset) * scale`. The identity when the two agree.
+/// `target`'s: `x -> (x - offset) * scale`. The identity when the two agree, and for every
+/// AU of [`flat_aus`]: a range that is not there cannot be stretched, so a single image or a
+/// still AU keeps its own reading (on the observer's scale, which the training data share)
+/// instead of landing on the training minimum, a neutral face.
 pub fn range_map(
     kind: Normalization,
     input: &[[f64; AU_COUNT]],
     target: &Normalizer,
 ) -> Normalizer {
-    let fitted = Normalizer::fit(kind, &pairs_of(input));
-    fitted.onto(target)
+    let mut map = Normalizer::fit(kind, &pairs_of(input)).onto(target);
+    for k in flat_aus(kind, input) {
+        map.offset[k] = 0.0;
+        map.scale[k] = 1.0;
+    }
+    map
 }
 
 /// The training data's per-AU statistics as a normalizer of `kind`.
@@ -592,6 +626,27 @@ mod tests {
         );
         let y = m.apply(&[1.5; AU_COUNT]);
         assert!(y.iter().all(|v| (v - 2.0).abs() < 1e-6), "{y:?}");
+    }
+
+    #[test]
+    fn a_single_row_or_a_still_au_keeps_its_reading() {
+        let target = training_range(Normalization::MinMax, &[[0.0; AU_COUNT], [4.0; AU_COUNT]]);
+        let mut smile = [0.0; AU_COUNT];
+        smile[8] = 3.0;
+        for kind in [Normalization::MinMax, Normalization::ZScore] {
+            assert_eq!(flat_aus(kind, &[smile]).len(), AU_COUNT);
+            let m = range_map(kind, &[smile], &target);
+            let x: Vec<f32> = smile.iter().map(|&v| v as f32).collect();
+            assert_eq!(m.apply(&x), x, "{kind:?}");
+        }
+        // In a clip, only the AU that does not move passes through.
+        let mut faint = smile;
+        faint[8] = 1.0;
+        let clip = vec![smile, faint];
+        let flat = flat_aus(Normalization::MinMax, &clip);
+        assert_eq!(flat.len(), AU_COUNT - 1);
+        assert!(!flat.contains(&8));
+        assert!(flat_aus(Normalization::None, &[smile]).is_empty());
     }
 
     #[test]

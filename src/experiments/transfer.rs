@@ -56,6 +56,9 @@ pub struct TransferSummary {
     /// RMS and largest angle (degrees) between the file's head pose and the neck's, when the
     /// pose drove the neck.
     pub pose_error: Option<(f64, f64)>,
+    /// The AUs normalization passed through on their own reading: their spread across the
+    /// file is below `table2::FLAT_SPREAD` (every AU of a single image).
+    pub flat: Vec<usize>,
     pub written: Vec<PathBuf>,
 }
 
@@ -157,6 +160,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         );
     }
     let reference: Vec<[f64; AU_COUNT]> = file.rows.iter().map(|r| r.aus).collect();
+    let flat = super::table2::flat_aus(opts.normalize, &reference);
     let map = match opts.normalize {
         Normalization::None => None,
         kind => {
@@ -339,6 +343,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         skipped: file.skipped,
         mse,
         pose_error,
+        flat,
         written,
     })
 }
