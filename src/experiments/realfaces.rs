@@ -446,7 +446,7 @@ pub fn markdown(rows: &[FileRow], spec: &Spec) -> String {
         seeds.join(", "),
         spec.table2_normalization.name(),
         spec.calibration,
-        if spec.calibration.ends_with("au_observer_fit.csv") {
+        if spec.reads_on_openface_scale() {
             ", both on OpenFace's scale after the fit"
         } else {
             ""

@@ -617,13 +617,17 @@ pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame], real: &[FileRow]
             "\nReal file: `{file}` ({} frames; {} rows with success = 0 skipped), a real \
              person's OpenFace output transferred through each seed's unified network. Its \
              rows compare OpenFace's AUs in the file with the observer's reading of the \
-             transferred face (observer `{}`; with `experiments/au_observer_fit.csv`, the \
-             readout fitted to OpenFace, both sides are on OpenFace's scale). Normalized = each \
-             AU mapped ({}) across the file's frames onto the training range. Per seed: \
+             transferred face (calibration `{}`{}). Normalized = each AU mapped ({}) across the \
+             file's frames onto the training range. Per seed: \
              `results/<experiment>/latest/table2_real.csv`.\n",
             first.frames,
             first.skipped,
             spec.calibration,
+            if spec.reads_on_openface_scale() {
+                ", the readout fitted to OpenFace: both sides are on OpenFace's scale"
+            } else {
+                ": the observer's own scale, not OpenFace's"
+            },
             spec.table2_normalization.name()
         ));
     }

@@ -1371,8 +1371,9 @@ mod tests {
 
     #[test]
     fn lip_contact_keeps_the_lips_from_passing_through_each_other() {
-        // Zygomaticus major with the lower half of orbicularis oris drives the lower lip up
-        // behind the upper one near the corners; without contact it passes 2 mm through.
+        // Zygomaticus major and levator anguli oris with the lower half of orbicularis oris
+        // drive the lower lip up behind the upper one near the corners; without contact it
+        // passes 2.4 mm through.
         let a = crossing_activations();
         let with = model();
         let without = no_lip_contact_model();
@@ -1399,6 +1400,8 @@ mod tests {
         for name in [
             "zygomaticus_major_left",
             "zygomaticus_major_right",
+            "levator_anguli_oris_left",
+            "levator_anguli_oris_right",
             "orbicularis_oris_lower_left",
             "orbicularis_oris_lower_right",
         ] {

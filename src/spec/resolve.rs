@@ -91,6 +91,14 @@ fn lookup<'a>(tree: &'a BTreeMap<String, Node>, key: &str) -> Option<&'a Node> {
     Some(node)
 }
 
+impl Spec {
+    /// Whether faces are read with the readout fitted to OpenFace, so that the observer's
+    /// AUs and a real file's are on the same scale.
+    pub fn reads_on_openface_scale(&self) -> bool {
+        self.calibration == crate::io::observer_fit::DEFAULT_READOUT
+    }
+}
+
 impl<'a> Reader<'a> {
     fn invalid(&self, node: &Node, key: &str, message: String) -> SpecError {
         SpecError::Invalid {
