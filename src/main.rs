@@ -465,8 +465,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("wrote {}", out.display());
                 return Ok(());
             }
-            let table = observe::load_calibration(&path)?;
             if fit {
+                let table = observe::load_calibration(&path)?;
                 let root = data.unwrap_or_else(observe::default_realdata_root);
                 let out = out.unwrap_or_else(|| PathBuf::from(DEFAULT_READOUT));
                 let result =
@@ -481,6 +481,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 observe::print_fit_summary(&result.report, stdout)?;
                 println!("wrote {} and {}", out.display(), report_path.display());
             } else if calibrate {
+                let table = observe::load_calibration(&path)?;
                 let updated = observe::calibrate(&face.source(), &table)?;
                 write_atomic(&path, updated.to_csv().as_bytes())
                     .with_context(|| format!("{}: cannot write", path.display()))?;
@@ -490,7 +491,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 let source = face.source();
                 let model = source.model()?;
                 let a = request.activations(&source.weights()?)?;
-                let observer = observe::model_observer(&model, table.calibration())?;
+                let observer = observe::model_observer(&model, read_any_calibration(&path)?)?;
                 let o = observe::observe_activations(&model, &observer, &a)?;
                 observe::print_observation(&o, stdout)?;
             }

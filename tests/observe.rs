@@ -296,3 +296,27 @@ fn observe_fit_says_what_it_needs_and_writes_nothing_on_error() {
     assert!(err.contains("at least two people"), "{err}");
     assert!(!out.exists() && !report.exists());
 }
+
+#[test]
+fn observe_reads_the_simulated_face_with_the_fitted_readout() {
+    // `observe --activation` takes either calibration file; under the readout fitted to
+    // OpenFace the whole zygomaticus major reads a smile (1.94 measured) and no frown.
+    let o = super::facelab(&[
+        "observe",
+        "--activation",
+        "zygomaticus_major_left=1,zygomaticus_major_right=1",
+        "--calibration",
+        "experiments/au_observer_fit.csv",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let read = |name: &str| -> f64 {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(&format!("{name}_r ")))
+            .unwrap_or_else(|| panic!("no {name} in {stdout}"));
+        line.split_whitespace().nth(1).unwrap().parse().unwrap()
+    };
+    assert!(read("AU12") > 1.5, "{stdout}");
+    assert!(read("AU04") < 0.3 && read("AU15") < 0.3, "{stdout}");
+}
