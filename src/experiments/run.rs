@@ -632,6 +632,13 @@ fn summary(rows: &[Row]) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
     (mean, ci, umean, uci)
 }
 
+fn paired_cell((m, c, excludes_zero): (f64, f64, bool), dagger: &str) -> String {
+    format!(
+        "{m:+.1e} ± {c:.1e}{}",
+        if excludes_zero { dagger } else { "" }
+    )
+}
+
 fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> String {
     let (mean, ci, umean, uci) = summary(rows);
     let heads: Vec<String> = table1::ORDER
@@ -692,8 +699,16 @@ fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> String {
         mean[6],
         ci[6]
     ));
+    out.push_str(&format!(
+        "| per-expression - unified, paired over seeds | {} | |\n",
+        table1::paired(rows)
+            .into_iter()
+            .map(|p| paired_cell(p, " †"))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    ));
     out.push_str(
-        "\nThe last row scores the unified network on each expression's test pairs and only that expression's network outputs, the like-for-like comparison with the row above it.\n",
+        "\nThe unified row scores the unified network on each expression's test pairs and only that expression's network outputs, the like-for-like comparison with the facelab row. The paired row is, per seed, the per-expression network's MSE minus the unified network's on those pairs, as mean ± 95% interval over seeds; † marks an interval that excludes 0 (negative: the per-expression network is better, positive: the unified one). The seeds vary the networks' initialization and batch order only; the dataset is the same for every seed.\n",
     );
     out
 }
@@ -725,6 +740,14 @@ fn table1_tex(rows: &[Row]) -> String {
             .iter()
             .zip(&uci)
             .map(|(m, c)| format!("{m:.2e} $\\pm$ {c:.1e}"))
+            .collect::<Vec<_>>()
+            .join(" & ")
+    ));
+    out.push_str(&format!(
+        "per-expression $-$ unified (paired) & {} & \\\\\n",
+        table1::paired(rows)
+            .into_iter()
+            .map(|p| paired_cell(p, "$^\\dagger$").replace('±', "$\\pm$"))
             .collect::<Vec<_>>()
             .join(" & ")
     ));
