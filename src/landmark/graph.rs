@@ -314,6 +314,21 @@ fn pad_for(
     Ok(x)
 }
 
+/// The input padded for a `kernel` at `stride` (TFLite's rule, `pad_for`), its NCHW dims, and
+/// the output's height and width (0 where the kernel does not fit; callers check `hp >= kh`).
+fn padded(
+    x: &Tensor,
+    padding: Padding,
+    kernel: [usize; 2],
+    stride: [usize; 2],
+) -> candle_core::Result<(Tensor, [usize; 4], [usize; 2])> {
+    let xp = pad_for(x, padding, kernel, stride)?;
+    let (n, c, hp, wp) = xp.dims4()?;
+    let out = |size: usize, k: usize, s: usize| size.checked_sub(k).map_or(0, |d| d / s + 1);
+    let (oh, ow) = (out(hp, kernel[0], stride[0]), out(wp, kernel[1], stride[1]));
+    Ok((xp, [n, c, hp, wp], [oh, ow]))
+}
+
 /// A full convolution plus its bias as one matrix product, `W (out x in k k) . columns (in k k
 /// x pixels)`, giving NCHW directly; a 1x1 convolution at stride 1 multiplies the input
 /// itself. candle's `conv2d` costs several times more here (4 ms for the mesh's first,
@@ -326,8 +341,7 @@ fn conv(
     stride: [usize; 2],
 ) -> candle_core::Result<Tensor> {
     let (co, ci, kh, kw) = w.dims4()?;
-    let xp = pad_for(x, padding, [kh, kw], stride)?;
-    let (n, c, hp, wp) = xp.dims4()?;
+    let (xp, [n, c, hp, wp], [oh, ow]) = padded(x, padding, [kh, kw], stride)?;
     if n != 1 || c != ci || bias.elem_count() != co || hp < kh || wp < kw {
         candle_core::bail!(
             "kernel {:?} and bias of {} do not fit an input of shape {:?}",
@@ -336,7 +350,6 @@ fn conv(
             xp.dims()
         );
     }
-    let (oh, ow) = ((hp - kh) / stride[0] + 1, (wp - kw) / stride[1] + 1);
     let columns = if kh * kw == 1 && stride == [1, 1] {
         xp.reshape((ci, oh * ow))?
     } else {
@@ -370,8 +383,7 @@ fn depthwise(
     stride: [usize; 2],
 ) -> candle_core::Result<Tensor> {
     let (kh, kw) = (w.dim(2)?, w.dim(3)?);
-    let xp = pad_for(x, padding, [kh, kw], stride)?;
-    let (n, c, hp, wp) = xp.dims4()?;
+    let (xp, [n, c, hp, wp], [oh, ow]) = padded(x, padding, [kh, kw], stride)?;
     if w.dims() != [c, 1, kh, kw] || bias.elem_count() != c || hp < kh || wp < kw {
         candle_core::bail!(
             "depthwise kernel {:?} and bias of {} do not fit an input of {c} channels, {hp}x{wp}",
@@ -379,7 +391,6 @@ fn depthwise(
             bias.elem_count()
         );
     }
-    let (oh, ow) = ((hp - kh) / stride[0] + 1, (wp - kw) / stride[1] + 1);
     let (xs, ws, bs) = (values(&xp)?, values(w)?, values(bias)?);
     // Tap by tap in row order, then the bias: each output's sum in the order of the
     // broadcast formulation, bit for bit (-0.0 is the exact identity of f32 addition). The
