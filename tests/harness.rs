@@ -285,6 +285,23 @@ fn same_spec_gives_the_same_bytes_across_threads_and_from_the_cache() {
     assert!(!bad.status.success());
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("diverged at epoch"), "{err}");
+
+    // Detector noise reuses the clean faces: no face is solved again, the noise is drawn on
+    // the cached readings, and the networks see other inputs.
+    let noisy = run_smoke(&one.join("results"), &["--set", "observer.noise_sd=0.3"]);
+    assert!(
+        noisy.status.success(),
+        "{}",
+        String::from_utf8_lossy(&noisy.stderr)
+    );
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&latest(&one.join("results"), "manifest.json")).unwrap();
+    let stages = manifest["stages"].as_array().unwrap();
+    let stage = |name: &str| stages.iter().find(|s| s["stage"] == name).cloned();
+    assert_eq!(stage("dataset").unwrap()["hit"], true, "{manifest}");
+    assert_eq!(stage("dataset_noise").unwrap()["hit"], false, "{manifest}");
+    assert!(stage("basis").is_none_or(|b| b["hit"] == true));
+    assert_ne!(latest(&one.join("results"), "table1.csv"), first);
 }
 
 #[cfg(unix)]

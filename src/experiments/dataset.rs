@@ -143,10 +143,11 @@ pub struct Sample {
     pub activations: [f64; CONTROL_COUNT],
 }
 
-/// Generates `params.pairs_per_expression` pairs per expression. Each sample draws from its
-/// own stream (`dataset/<expression>/<index>`), so the result does not depend on how rayon
-/// splits the work. `au_controls` (per AU, the controls of its muscle group, as
-/// `FacsMaps::au_controls`) serves the broad family's single-AU samples.
+/// Generates `params.pairs_per_expression` pairs per expression, read without detector noise
+/// (see [`add_noise`]). Each sample draws from its own stream (`dataset/<expression>/<index>`),
+/// so the result does not depend on how rayon splits the work. `au_controls` (per AU, the
+/// controls of its muscle group, as `FacsMaps::au_controls`) serves the broad family's
+/// single-AU samples.
 #[allow(clippy::too_many_arguments)]
 pub fn generate(
     model: &FaceModel,
@@ -156,7 +157,6 @@ pub fn generate(
     basis: Option<&LinearBasis>,
     au_controls: &[Vec<usize>],
     params: &DatasetParams,
-    noise: &ObserverNoise,
     seed: u64,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<Sample>> {
@@ -164,7 +164,6 @@ pub fn generate(
         tolerance: params.tolerance,
         ..SolveParams::default()
     };
-    let gains = noise.subject_gains(&mut stream(seed, "dataset/observer-gains"));
     let jobs: Vec<(Expression, usize)> = Expression::ALL
         .iter()
         .flat_map(|&e| (0..params.pairs_per_expression).map(move |i| (e, i)))
@@ -174,14 +173,7 @@ pub fn generate(
             || Workspace::new(model),
             |ws, &(e, index)| -> Result<Sample> {
                 let mut rng = stream(seed, &format!("dataset/{e}/{index}"));
-                let (scale, a) = match params.family {
-                    Family::Paper => {
-                        let scale = rng.uniform();
-                        let jaw = rng.uniform();
-                        (scale, weights.sample(e, scale, jaw))
-                    }
-                    Family::Broad => broad_sample(weights, au_controls, e, &mut rng),
-                };
+                let (scale, a) = draw(params.family, weights, au_controls, e, &mut rng);
                 let jaw = a.get(JAW_ROTATION);
                 let state = match (params.start, basis) {
                     (SolveStart::Predicted, Some(b)) => solve_predicted(model, b, &a, ws, &solve),
@@ -191,10 +183,7 @@ pub fn generate(
                 .with_context(|| {
                     format!("dataset sample {e}/{index} (s = {scale:.4}, jaw = {jaw:.4})")
                 })?;
-                let mut aus = observer.observe(&reader.read(model, &state, None)?)?.aus;
-                if !noise.is_off() {
-                    noise.apply(&mut aus, &gains, &mut rng);
-                }
+                let aus = observer.observe(&reader.read(model, &state, None)?)?.aus;
                 tick();
                 Ok(Sample {
                     expression: e,
@@ -205,6 +194,55 @@ pub fn generate(
                 })
             },
         )
+        .collect()
+}
+
+/// One sample's scale and activations from its stream.
+fn draw(
+    family: Family,
+    weights: &ExpressionWeights,
+    au_controls: &[Vec<usize>],
+    e: Expression,
+    rng: &mut Stream,
+) -> (f64, Activations) {
+    match family {
+        Family::Paper => {
+            let scale = rng.uniform();
+            let jaw = rng.uniform();
+            (scale, weights.sample(e, scale, jaw))
+        }
+        Family::Broad => broad_sample(weights, au_controls, e, rng),
+    }
+}
+
+/// The detector's error on clean samples (`observer.noise_sd`, `observer.gain_spread`;
+/// DESIGN 2.2): one set of gain factors for the data set (`dataset/observer-gains`) and fresh
+/// noise per reading, drawn from each sample's own stream where its activations' draws end.
+/// The faces are the same whatever the noise, so a noise sweep solves them once; the result
+/// is the same bits as reading with noise while generating. Returns the samples unchanged
+/// when the noise is off.
+pub fn add_noise(
+    samples: &[Sample],
+    weights: &ExpressionWeights,
+    au_controls: &[Vec<usize>],
+    params: &DatasetParams,
+    noise: &ObserverNoise,
+    seed: u64,
+) -> Vec<Sample> {
+    if noise.is_off() {
+        return samples.to_vec();
+    }
+    let gains = noise.subject_gains(&mut stream(seed, "dataset/observer-gains"));
+    samples
+        .iter()
+        .map(|s| {
+            let mut rng = stream(seed, &format!("dataset/{}/{}", s.expression, s.index));
+            // Past the activations' draws, to where the reading's noise was drawn.
+            let _ = draw(params.family, weights, au_controls, s.expression, &mut rng);
+            let mut out = s.clone();
+            noise.apply(&mut out.aus, &gains, &mut rng);
+            out
+        })
         .collect()
 }
 
@@ -402,6 +440,83 @@ mod tests {
                 broad_sample(&weights, &facs.au_controls, e, &mut rng)
             })
             .collect()
+    }
+
+    #[test]
+    fn detector_noise_is_per_sample_reproducible_and_of_its_stated_size() {
+        let weights = read_expressions(&default_expressions_path()).unwrap();
+        let facs = read_facs(
+            &data_path(DEFAULT_EXPRESSION_AUS),
+            &data_path(DEFAULT_AU_MUSCLES),
+        )
+        .unwrap();
+        let params = DatasetParams {
+            family: Family::Broad,
+            ..DatasetParams::default()
+        };
+        let seed = 5;
+        let clean: Vec<Sample> = Expression::ALL
+            .iter()
+            .flat_map(|&e| (0..200).map(move |i| (e, i)))
+            .map(|(e, index)| {
+                let mut rng = stream(seed, &format!("dataset/{e}/{index}"));
+                let (scale, a) = draw(params.family, &weights, &facs.au_controls, e, &mut rng);
+                Sample {
+                    expression: e,
+                    index,
+                    scale,
+                    aus: [2.5; AU_COUNT],
+                    activations: *a.values(),
+                }
+            })
+            .collect();
+        let noise = ObserverNoise {
+            noise_sd: 0.2,
+            gain_spread: 0.0,
+        };
+        let add = |s: &[Sample], n: &ObserverNoise| {
+            add_noise(s, &weights, &facs.au_controls, &params, n, seed)
+        };
+        assert_eq!(
+            add(&clean, &ObserverNoise::default()),
+            clean,
+            "off: unchanged"
+        );
+        let noisy = add(&clean, &noise);
+        // Each sample's noise comes from its own stream: the order of the input is irrelevant.
+        let mut reversed = clean.clone();
+        reversed.reverse();
+        let mut again = add(&reversed, &noise);
+        again.reverse();
+        assert_eq!(again, noisy);
+        // The noise is where generating with noise drew it: after the activations' draws.
+        let s = &clean[7];
+        let mut rng = stream(seed, &format!("dataset/{}/{}", s.expression, s.index));
+        let _ = draw(
+            params.family,
+            &weights,
+            &facs.au_controls,
+            s.expression,
+            &mut rng,
+        );
+        let mut aus = s.aus;
+        noise.apply(&mut aus, &[1.0; AU_COUNT], &mut rng);
+        assert_eq!(aus, noisy[7].aus);
+        // Its size: zero mean, sd 0.2 (2.5 +/- 0.2 is never clamped).
+        let d: Vec<f64> = noisy
+            .iter()
+            .zip(&clean)
+            .flat_map(|(n, c)| (0..AU_COUNT).map(move |k| n.aus[k] - c.aus[k]))
+            .collect();
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+        assert!(
+            mean.abs() < 0.01 && (sd - 0.2).abs() < 0.01,
+            "mean {mean}, sd {sd}"
+        );
+        for (n, c) in noisy.iter().zip(&clean) {
+            assert_eq!((n.scale, n.activations), (c.scale, c.activations));
+        }
     }
 
     #[test]

@@ -30,8 +30,9 @@ use crate::sim::neck::{
 };
 use crate::sim::{FaceModel, State};
 
-/// Bump when the data, training or evaluation change meaning.
-const HEADPOSE_VERSION: u32 = 4;
+/// Bump when the data, training or evaluation change meaning. 5: the teacher's projected
+/// gradient restarts its momentum on the proximal-gradient test and always takes its step.
+const HEADPOSE_VERSION: u32 = 5;
 /// The spec keys the data stage reads (its targets, poses and split).
 const DATA_KEYS: [&str; 7] = [
     "headpose.seed",

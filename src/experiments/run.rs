@@ -80,7 +80,11 @@ pub struct RunSummary {
 
 /// Values under the given dotted prefixes, as canonical `key = value` lines.
 pub(super) fn values_text(spec: &Spec, prefixes: &[&str]) -> String {
-    spec.values
+    prefixed_text(&spec.values, prefixes)
+}
+
+fn prefixed_text(values: &BTreeMap<String, toml::Value>, prefixes: &[&str]) -> String {
+    values
         .iter()
         .filter(|(k, _)| prefixes.iter().any(|p| k.starts_with(p)))
         .map(|(k, v)| format!("{k} = {v}\n"))
@@ -136,6 +140,8 @@ fn assets() -> Result<Assets> {
 struct Keys {
     basis: Option<String>,
     dataset: String,
+    /// The faces without detector noise, where the spec's observer adds noise.
+    clean_dataset: Option<String>,
     /// (seed, network) -> key, in seed then `Network::all()` order.
     train: Vec<((u64, Network), String)>,
 }
@@ -152,17 +158,27 @@ fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
         );
         cache::key("basis", BASIS_VERSION, &v, &[])
     });
-    let dv = format!(
-        "{face}data={}\n{}",
-        a.data(spec)?,
-        values_text(spec, &["dataset.", "observer."])
-    );
-    let dataset = cache::key(
-        "dataset",
-        DATASET_VERSION,
-        &dv,
-        &basis.iter().map(String::as_str).collect::<Vec<_>>(),
-    );
+    // The faces are read without detector noise and cached under the key of the spec with
+    // the noise off; a noisy data set is cached under its own key, made from the clean one
+    // (`dataset::add_noise`), so a noise sweep solves the faces once.
+    let data = a.data(spec)?;
+    let dataset_key = |values: &BTreeMap<String, toml::Value>| {
+        let text = prefixed_text(values, &["dataset.", "observer."]);
+        cache::key(
+            "dataset",
+            DATASET_VERSION,
+            &format!("{face}data={data}\n{text}"),
+            &basis.iter().map(String::as_str).collect::<Vec<_>>(),
+        )
+    };
+    let dataset = dataset_key(&spec.values);
+    let clean_dataset = (!spec.observer.is_off()).then(|| {
+        let mut quiet = spec.values.clone();
+        for k in ["observer.noise_sd", "observer.gain_spread"] {
+            quiet.insert(k.to_string(), toml::Value::Float(0.0));
+        }
+        dataset_key(&quiet)
+    });
     let mut train = Vec::new();
     for &seed in &spec.seeds {
         for network in Network::all() {
@@ -182,6 +198,7 @@ fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
     Ok(Keys {
         basis,
         dataset,
+        clean_dataset,
         train,
     })
 }
@@ -342,44 +359,73 @@ fn run_cell(
     let mut record = recorder(&cell.name, records);
     let source = FaceSource::of_spec(spec);
 
-    // Dataset (and the basis it starts from).
+    // Dataset (and the basis it starts from): the clean faces, then the detector's noise.
     let t = Instant::now();
-    let samples: Vec<Sample> = match cache.get("dataset", &k.dataset)? {
-        Some(e) => {
-            let text = String::from_utf8(e.read("dataset.csv")?)?;
-            let s = dataset::from_csv(&text, &e.path("dataset.csv").display().to_string())?;
-            record("dataset", &k.dataset, true, t);
-            s
-        }
-        None => {
-            let model = source.model()?;
-            let weights = source.weights()?;
-            let reader = FaceReader::new(spec.observer_source)?;
-            let observer = reader.observer(&model, spec_calibration(spec)?)?;
-            let basis = load_basis(&k, cache, &model, spec, &mut record)?;
-            let total = spec.dataset.pairs_per_expression * 6;
-            let progress = bar(total as u64, "dataset");
-            let tick = || progress.inc(1);
-            let s = dataset::generate(
-                &model,
-                &weights,
-                &reader,
-                &observer,
-                basis.as_ref(),
+    let read = |e: &Entry| -> Result<Vec<Sample>> {
+        let text = String::from_utf8(e.read("dataset.csv")?)?;
+        dataset::from_csv(&text, &e.path("dataset.csv").display().to_string())
+    };
+    let cached = cache.get("dataset", &k.dataset)?;
+    let samples: Vec<Sample> = if let Some(e) = cached {
+        let s = read(&e)?;
+        record("dataset", &k.dataset, true, t);
+        s
+    } else {
+        let clean_key = k.clean_dataset.as_ref().unwrap_or(&k.dataset);
+        let clean = match cache.get("dataset", clean_key)? {
+            Some(e) => {
+                let s = read(&e)?;
+                record("dataset", clean_key, true, t);
+                s
+            }
+            None => {
+                let model = source.model()?;
+                let reader = FaceReader::new(spec.observer_source)?;
+                let observer = reader.observer(&model, spec_calibration(spec)?)?;
+                let basis = load_basis(&k, cache, &model, spec, &mut record)?;
+                let total = spec.dataset.pairs_per_expression * 6;
+                let progress = bar(total as u64, "dataset");
+                let tick = || progress.inc(1);
+                let s = dataset::generate(
+                    &model,
+                    &source.weights()?,
+                    &reader,
+                    &observer,
+                    basis.as_ref(),
+                    &a.facs.au_controls,
+                    &spec.dataset,
+                    spec.dataset.seed,
+                    &tick,
+                )?;
+                progress.finish_and_clear();
+                cache.put(
+                    "dataset",
+                    clean_key,
+                    &[("dataset.csv".into(), dataset::to_csv(&s).into_bytes())],
+                )?;
+                record("dataset", clean_key, false, t);
+                s
+            }
+        };
+        if k.clean_dataset.is_some() {
+            let t = Instant::now();
+            let noisy = dataset::add_noise(
+                &clean,
+                &source.weights()?,
                 &a.facs.au_controls,
                 &spec.dataset,
                 &spec.observer,
                 spec.dataset.seed,
-                &tick,
-            )?;
-            progress.finish_and_clear();
+            );
             cache.put(
                 "dataset",
                 &k.dataset,
-                &[("dataset.csv".into(), dataset::to_csv(&s).into_bytes())],
+                &[("dataset.csv".into(), dataset::to_csv(&noisy).into_bytes())],
             )?;
-            record("dataset", &k.dataset, false, t);
-            s
+            record("dataset_noise", &k.dataset, false, t);
+            noisy
+        } else {
+            clean
         }
     };
 

@@ -57,7 +57,9 @@ pub struct TrainParams {
     pub batch_size: usize,
     /// Passes over the training pairs. Default 100.
     pub epochs: usize,
-    /// Input normalization. Default none (the paper feeds raw AUs).
+    /// Input normalization. Default none (raw AUs); the paper normalizes each AU across all
+    /// pairs (Zeng et al. 4.1, 4.3), which its specs (`experiments/table1.toml` and those
+    /// that extend it) set as `train.normalization = "minmax"`.
     pub normalization: Normalization,
 }
 

@@ -231,6 +231,12 @@ impl Observer {
         &self.calibration
     }
 
+    /// The neutral face's inter-ocular distance (the units of the landmarks it was made
+    /// from): the unit of `displacements`.
+    pub fn iod(&self) -> f64 {
+        self.iod
+    }
+
     /// Landmarks already aligned with the neutral face, in face-frame IOD units.
     fn to_frame(&self, p: &[V3; LANDMARK_COUNT]) -> [V3; LANDMARK_COUNT] {
         std::array::from_fn(|i| {

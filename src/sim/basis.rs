@@ -1,7 +1,7 @@
-//! Linear muscle basis after Choe, Lee & Ko 2001 (their eq. 4): the face as the rest face plus
-//! a weighted sum of per-control displacement fields, each computed once with the nonlinear
-//! solver at that control's full activation. Jaw slide and twist, neutral at 0.5, enter with
-//! weight `2 (value - 0.5)` on their field at 1.0.
+//! Linear muscle basis after Choe, Lee & Ko 2001 (their eq. 9, `w = w_init + sum a_i w_i`):
+//! the face as the rest face plus a weighted sum of per-control displacement fields, each
+//! computed once with the nonlinear solver at that control's full activation. Jaw slide and
+//! twist, neutral at 0.5, enter with weight `2 (value - 0.5)` on their field at 1.0.
 //!
 //! It costs microseconds per face instead of milliseconds, but ignores contact, stiffening
 //! and the interaction of muscles; `bench solve` reports how far it is from the nonlinear face.

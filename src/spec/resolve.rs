@@ -510,6 +510,9 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
             (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
         })?,
         refinements: r.integer("inversion.refinements", iv.refinements as i64, 0, 20)? as usize,
+        landmark_noise_sd: r.float("inversion.landmark_noise_sd", iv.landmark_noise_sd, &|v| {
+            (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"))
+        })?,
     };
     let headpose = read_headpose(&mut r)?;
     let realfaces = read_realfaces(&mut r, &tables)?;
