@@ -883,7 +883,14 @@ pub fn figures(
             let state = posed_face(&rest, &motion);
             cells.push(render(model, &state, &options));
             let d = run.pose.last().copied().unwrap_or_default().degrees();
-            labels.push(format!("{:.0} / {:.0} / {:.0}", d[0], d[1], d[2]));
+            // `+ 0.0` turns a rounded -0 into 0, so a label never reads "-0".
+            let deg = |x: f64| x.round() + 0.0;
+            labels.push(format!(
+                "{:.0} / {:.0} / {:.0}",
+                deg(d[0]),
+                deg(d[1]),
+                deg(d[2])
+            ));
         }
     }
     let grid = labelled_grid(
