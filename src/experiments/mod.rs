@@ -8,6 +8,7 @@ pub mod headpose;
 pub mod inversion;
 pub mod observe;
 pub mod photos;
+pub mod pose_transfer;
 pub mod reach;
 pub mod reader;
 pub mod realfaces;

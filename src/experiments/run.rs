@@ -24,6 +24,7 @@ use super::dataset::{self, Sample, SolveStart};
 use super::face::FaceSource;
 use super::headpose;
 use super::inversion;
+use super::pose_transfer;
 use super::reader::FaceReader;
 use super::realfaces;
 use super::table1::{self, Network, Row};
@@ -909,6 +910,15 @@ fn point_latest(experiment_dir: &Path, run: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Writes `paper-tables/<report prefix><name>`.
+fn paper_table(out_root: &Path, spec: &Spec, name: &str, text: &str) -> Result<()> {
+    let path = out_root
+        .join("paper-tables")
+        .join(format!("{}{name}", spec.report_prefix));
+    write_atomic(&path, text.as_bytes())
+        .with_context(|| format!("{}: cannot write", path.display()))
+}
+
 /// The head-neck experiment of one cell: CSVs into the run folder (through `write`), the
 /// paper table and figures when the spec is a single cell.
 fn headpose_outputs(
@@ -919,7 +929,7 @@ fn headpose_outputs(
     cache: &Cache,
     records: &mut Vec<StageRecord>,
     write: &mut dyn FnMut(String, Vec<u8>) -> Result<()>,
-) -> Result<()> {
+) -> Result<Vec<u8>> {
     let spec = &cell.spec;
     let mut record = recorder(&cell.name, records);
     let out = headpose::stage(spec, cache, &mut record, &bar)?;
@@ -955,7 +965,7 @@ fn headpose_outputs(
         let figures = out_root.join("figures").join(format!("{report}headpose"));
         headpose::figures(&figures, &out, spec, &source.model()?)?;
     }
-    Ok(())
+    Ok(out.weights)
 }
 
 /// Runs every cell of a spec file.
@@ -1009,8 +1019,9 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             spec::to_toml(&cell.spec.values).into_bytes(),
             &mut outputs,
         )?;
+        let mut voluntary = None;
         if cell.spec.tables.iter().any(|t| t == "headpose") {
-            headpose_outputs(
+            voluntary = Some(headpose_outputs(
                 cell,
                 &prefix,
                 cells.len() == 1,
@@ -1018,7 +1029,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 &cache,
                 &mut records,
                 &mut |rel, bytes| write(rel, bytes, &mut outputs),
-            )?;
+            )?);
         }
         if cell.spec.tables.iter().all(|t| t == "headpose") {
             continue;
@@ -1078,12 +1089,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 &mut outputs,
             )?;
             if cells.len() == 1 {
-                write_atomic(
-                    &out_root
-                        .join("paper-tables")
-                        .join(format!("{}inversion.md", cell.spec.report_prefix)),
-                    iv.markdown.as_bytes(),
-                )?;
+                paper_table(&out_root, &cell.spec, "inversion.md", &iv.markdown)?;
             }
         }
         if let Some(t2) = &result.table2 {
@@ -1126,6 +1132,28 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                     write_atomic(&figures.join(name), bytes)?;
                 }
                 table2_stage::bars(&figures.join("au_mse_bars.png"), &t2.rows)?;
+            }
+            // Head pose from the cohorts, where the spec has the head-neck controller.
+            if let Some(weights) = &voluntary {
+                let mut record = recorder(&cell.name, &mut records);
+                let rows = pose_transfer::stage(
+                    &cell.spec,
+                    &cache,
+                    &mut record,
+                    &bar,
+                    &t2.cohort_key,
+                    weights,
+                    &t2.reference,
+                )?;
+                write(
+                    format!("{prefix}table2_pose.csv"),
+                    pose_transfer::csv(&rows).into_bytes(),
+                    &mut outputs,
+                )?;
+                if cells.len() == 1 {
+                    let md = pose_transfer::markdown(&rows);
+                    paper_table(&out_root, &cell.spec, "table2_pose.md", &md)?;
+                }
             }
         }
         if let Some(rf) = &result.realfaces {

@@ -406,33 +406,56 @@ fn drive_neck(
         );
     }
     // Sampled at 400 Hz; each frame takes the nearest sample.
-    let every = 10;
-    if rows.len() == 1 {
-        let (pose, offset) = hold_still(&neck, &mlp, &targets, every)
-            .with_context(|| format!("{}: driving the neck", opts.openface.display()))?;
-        return Ok(HeadTrack {
-            target: targets.poses.clone(),
-            pose: vec![pose],
-            offset: vec![offset],
-        });
-    }
-    let duration = rows.len() as f64 * dt;
-    let run = simulate(
-        &neck,
-        &mut Learned { mlp: &mlp },
-        &targets,
-        BodyState::rest(),
-        duration,
-        every,
-    )
-    .with_context(|| format!("{}: driving the neck", opts.openface.display()))?;
-    let rate = neck.params.simulation_rate / every as f64;
-    let pick = |i: usize| ((i as f64 * dt * rate).round() as usize).min(run.time.len() - 1);
+    let (pose, offset) = follow(&neck, &mlp, &targets, false)
+        .with_context(|| format!("{}: driving the neck", opts.openface.display()))?;
     Ok(HeadTrack {
         target: targets.poses.clone(),
-        pose: (0..rows.len()).map(|i| run.pose[pick(i)]).collect(),
-        offset: (0..rows.len()).map(|i| run.skull_offset[pick(i)]).collect(),
+        pose,
+        offset,
     })
+}
+
+/// The head under a learned voluntary controller following `targets` (frames `1 / fps`
+/// apart): one pose is a still, held until the head settles ([`hold_still`]); more are a clip,
+/// simulated from the upright rest posture or, with `settled_start`, from the posture that
+/// holds the clip's first pose (a clip cut from a longer video). Returns each frame's pose
+/// and skull offset, sampled at 400 Hz, each frame the nearest sample.
+pub(crate) fn follow(
+    neck: &crate::sim::neck::Neck,
+    mlp: &Mlp,
+    targets: &PoseSequence,
+    settled_start: bool,
+) -> Result<(Vec<HeadPose>, Vec<crate::sim::geom::V3>)> {
+    let every = 10;
+    let first = PoseSequence {
+        fps: targets.fps,
+        poses: targets.poses.iter().take(1).copied().collect(),
+    };
+    if targets.poses.len() == 1 {
+        let (pose, offset, _) = hold_still(neck, mlp, &first, every)?;
+        return Ok((vec![pose], vec![offset]));
+    }
+    let start = if settled_start {
+        hold_still(neck, mlp, &first, every)?.2
+    } else {
+        BodyState::rest()
+    };
+    let dt = 1.0 / targets.fps;
+    let frames = targets.poses.len();
+    let run = simulate(
+        neck,
+        &mut Learned { mlp },
+        targets,
+        start,
+        frames as f64 * dt,
+        every,
+    )?;
+    let rate = neck.params.simulation_rate / every as f64;
+    let pick = |i: usize| ((i as f64 * dt * rate).round() as usize).min(run.time.len() - 1);
+    Ok((
+        (0..frames).map(|i| run.pose[pick(i)]).collect(),
+        (0..frames).map(|i| run.skull_offset[pick(i)]).collect(),
+    ))
 }
 
 /// How long a still is held per step while the head settles, and when it has settled: the
@@ -443,13 +466,13 @@ const STILL_MAX_STEPS: usize = 12;
 
 /// A photo's head pose: the neck holds the one target from the upright rest posture until the
 /// head settles (a video frame lasts 1/30 s, far too short to reach a still's pose). Returns
-/// the settled pose and skull offset; an error if the head still moves after 6 s.
+/// the settled pose, skull offset and body state; an error if the head still moves after 6 s.
 fn hold_still(
     neck: &crate::sim::neck::Neck,
     mlp: &Mlp,
     target: &PoseSequence,
     every: usize,
-) -> Result<(HeadPose, crate::sim::geom::V3)> {
+) -> Result<(HeadPose, crate::sim::geom::V3, BodyState)> {
     let mut state = BodyState::rest();
     let mut last: Option<HeadPose> = None;
     for _ in 0..STILL_MAX_STEPS {
@@ -466,7 +489,7 @@ fn hold_still(
             *run.skull_offset.last().context("an empty neck run")?,
         );
         if last.is_some_and(|p| p.error_degrees(pose) < STILL_SETTLED_DEG) {
-            return Ok((pose, offset));
+            return Ok((pose, offset, run.final_state));
         }
         last = Some(pose);
         state = run.final_state;

@@ -1,0 +1,243 @@
+//! Head pose transferred from Table 2's cohorts (Zeng et al. 5.3, Figs. 4-5): each reference
+//! frame's head pose (what OpenFace's `pose_Rx, pose_Ry, pose_Rz` would say of the subject)
+//! drives the neck through the learned voluntary controller of the head-neck experiment, and
+//! the achieved head pose is compared with it.
+//!
+//! - Images: each pose is a still, held from the upright rest posture until the head settles.
+//! - Videos: each clip (one subject, one expression) is followed at the clip's frame rate,
+//!   starting from the posture that holds its first pose, as a clip cut from a longer video.
+//!
+//! The error of a frame is the angle of the rotation between the target and achieved poses.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+
+use super::table2::RefFrame;
+use super::transfer::follow;
+use crate::cache::Cache;
+use crate::cohort::{CohortKind, CohortParams};
+use crate::learn::Mlp;
+use crate::sim::neck::{HeadPose, Neck, PoseSequence};
+
+/// Bump when the evaluation changes meaning.
+const POSE_TRANSFER_VERSION: u32 = 1;
+
+/// One cohort's pose transfer: frames, how far the targets turn from upright (mean angle),
+/// and the error (mean, RMS, max; degrees).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseRow {
+    pub cohort: CohortKind,
+    pub frames: usize,
+    pub mean_target_deg: f64,
+    pub mean_error_deg: f64,
+    pub rms_error_deg: f64,
+    pub max_error_deg: f64,
+}
+
+fn target(f: &RefFrame) -> HeadPose {
+    HeadPose {
+        pitch: f.pose[0],
+        yaw: f.pose[1],
+        roll: f.pose[2],
+    }
+}
+
+/// The units of work: every image alone, every video clip (one subject, one expression) as
+/// its run of consecutive frames; indices into `reference`.
+fn jobs(reference: &[RefFrame]) -> Vec<Vec<usize>> {
+    let mut jobs: Vec<Vec<usize>> = Vec::new();
+    for (i, f) in reference.iter().enumerate() {
+        let same_clip = |j: &usize| {
+            let g = &reference[*j];
+            f.cohort.is_video()
+                && (g.cohort, g.subject, g.expression) == (f.cohort, f.subject, f.expression)
+        };
+        match jobs.last_mut() {
+            Some(job) if job.last().is_some_and(same_clip) => job.push(i),
+            _ => jobs.push(vec![i]),
+        }
+    }
+    jobs
+}
+
+/// Per reference frame, the angle between its target pose and the pose the neck reaches.
+pub fn errors(
+    neck: &Neck,
+    mlp: &Mlp,
+    cohort: &CohortParams,
+    reference: &[RefFrame],
+    tick: &(dyn Fn() + Sync),
+) -> Result<Vec<f64>> {
+    let jobs = jobs(reference);
+    let per_job: Vec<Vec<(usize, f64)>> = jobs
+        .par_iter()
+        .map(|job| -> Result<Vec<(usize, f64)>> {
+            let first = &reference[job[0]];
+            let targets = PoseSequence {
+                fps: cohort.clip(first.cohort).fps,
+                poses: job.iter().map(|&i| target(&reference[i])).collect(),
+            };
+            let (targets, _) = targets.checked(neck).with_context(|| {
+                format!(
+                    "{} subject {}: head pose",
+                    first.cohort.name(),
+                    first.subject
+                )
+            })?;
+            let (achieved, _) = follow(neck, mlp, &targets, true).with_context(|| {
+                format!(
+                    "pose transfer: {} subject {}, {} frame(s)",
+                    first.cohort.name(),
+                    first.subject,
+                    job.len()
+                )
+            })?;
+            tick();
+            Ok(job
+                .iter()
+                .zip(&achieved)
+                .map(|(&i, a)| (i, target(&reference[i]).error_degrees(*a)))
+                .collect())
+        })
+        .collect::<Result<_>>()?;
+    let mut out = vec![f64::NAN; reference.len()];
+    for (i, e) in per_job.into_iter().flatten() {
+        out[i] = e;
+    }
+    Ok(out)
+}
+
+/// The per-cohort summary of `errors`.
+pub fn summarize(reference: &[RefFrame], errors: &[f64]) -> Vec<PoseRow> {
+    CohortKind::ALL
+        .iter()
+        .filter_map(|&kind| {
+            let idx: Vec<usize> = (0..reference.len())
+                .filter(|&i| reference[i].cohort == kind)
+                .collect();
+            if idx.is_empty() {
+                return None;
+            }
+            let e: Vec<f64> = idx.iter().map(|&i| errors[i]).collect();
+            let upright = HeadPose::default();
+            let turn: Vec<f64> = idx
+                .iter()
+                .map(|&i| upright.error_degrees(target(&reference[i])))
+                .collect();
+            Some(PoseRow {
+                cohort: kind,
+                frames: idx.len(),
+                mean_target_deg: crate::stats::mean(&turn),
+                mean_error_deg: crate::stats::mean(&e),
+                rms_error_deg: crate::stats::mean(&e.iter().map(|x| x * x).collect::<Vec<_>>())
+                    .sqrt(),
+                max_error_deg: e.iter().copied().fold(0.0, f64::max),
+            })
+        })
+        .collect()
+}
+
+/// A row's cells: the cohort's name, then its numbers with `digits` decimals.
+fn cells(r: &PoseRow, digits: usize) -> [String; 6] {
+    let n = |x: f64| format!("{x:.digits$}");
+    [
+        r.cohort.name().to_string(),
+        r.frames.to_string(),
+        n(r.mean_target_deg),
+        n(r.mean_error_deg),
+        n(r.rms_error_deg),
+        n(r.max_error_deg),
+    ]
+}
+
+/// `cohort,frames,mean_target_deg,mean_error_deg,rms_error_deg,max_error_deg`.
+pub fn csv(rows: &[PoseRow]) -> String {
+    let mut out =
+        String::from("cohort,frames,mean_target_deg,mean_error_deg,rms_error_deg,max_error_deg\n");
+    for r in rows {
+        out.push_str(&cells(r, 4).join(","));
+        out.push('\n');
+    }
+    out
+}
+
+/// The pose table beside Table 2.
+pub fn markdown(rows: &[PoseRow]) -> String {
+    let mut out = String::from(
+        "# Table 2, head pose: transferred through the voluntary controller and the neck\n\n\
+         Each reference frame's head pose (the subject's pose_Rx, pose_Ry, pose_Rz) drives the \
+         simulated neck through the learned voluntary controller of the head-neck experiment \
+         (`voluntary.safetensors`). Images: each pose a still, held from upright rest until \
+         the head settles (it turns less than 0.05 deg in 0.5 s). Videos: each clip followed \
+         at its frame rate from the posture that holds its first pose. Error: the angle of the \
+         rotation from the target to the achieved pose (deg); target: the angle from upright.\n\n\
+         | cohort | frames | mean target turn (deg) | mean error (deg) | RMS error (deg) | max error (deg) |\n\
+         |---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        let mut c = cells(r, 2);
+        c[0] = c[0].replace('_', " ");
+        out.push_str(&format!("| {} |\n", c.join(" | ")));
+    }
+    out
+}
+
+/// The cached stage: its key is the cohort's key, the controller's bytes and the neck's
+/// parameters (`headpose.*`).
+#[allow(clippy::too_many_arguments)]
+pub fn stage(
+    spec: &crate::spec::Spec,
+    cache: &Cache,
+    record: &mut dyn FnMut(&str, &str, bool, Instant),
+    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
+    cohort_key: &str,
+    voluntary: &[u8],
+    reference: &[RefFrame],
+) -> Result<Vec<PoseRow>> {
+    let values = super::run::values_text(spec, &["headpose."]);
+    let controller = crate::cache::sha256(voluntary);
+    let key = crate::cache::key(
+        "pose_transfer",
+        POSE_TRANSFER_VERSION,
+        &values,
+        &[cohort_key, &controller],
+    );
+    let t = Instant::now();
+    let errors = match cache.get("pose_transfer", &key)? {
+        Some(e) => {
+            let text = String::from_utf8(e.read("errors.csv")?)?;
+            let errors = text
+                .lines()
+                .skip(1)
+                .map(|l| {
+                    l.parse::<f64>()
+                        .with_context(|| format!("{}: `{l}`", e.path("errors.csv").display()))
+                })
+                .collect::<Result<Vec<f64>>>()?;
+            record("pose_transfer", &key, true, t);
+            errors
+        }
+        None => {
+            let mlp = Mlp::from_safetensors(voluntary)?;
+            let neck = spec.headpose.neck();
+            let progress = bar(jobs(reference).len() as u64, "pose");
+            let tick = || progress.inc(1);
+            let errors = errors(&neck, &mlp, &spec.cohort, reference, &tick)?;
+            progress.finish_and_clear();
+            let mut text = String::from("error_deg\n");
+            for e in &errors {
+                text.push_str(&format!("{e}\n"));
+            }
+            cache.put(
+                "pose_transfer",
+                &key,
+                &[("errors.csv".into(), text.into_bytes())],
+            )?;
+            record("pose_transfer", &key, false, t);
+            errors
+        }
+    };
+    Ok(summarize(reference, &errors))
+}
