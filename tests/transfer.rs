@@ -85,6 +85,40 @@ fn subjects_differ_from_the_base_face_but_keep_its_topology() {
 }
 
 #[test]
+fn video_heads_sway_about_their_mean_pose_and_images_hold_theirs() {
+    let source = FaceSource::default();
+    let (mesh, weights) = (source.mesh().unwrap(), source.weights().unwrap());
+    let subject = Subject::draw(&mesh, source.params(), &weights, &identical(), 1, "t", 0).unwrap();
+    let cohort = CohortParams::default();
+    let talking = cohort.talking_videos;
+    let mut still = talking;
+    still.head_motion_deg = 0.0;
+    let moving = clips(&subject, CohortKind::TalkingVideos, &talking, 1);
+    let held = clips(&subject, CohortKind::TalkingVideos, &still, 1);
+    for (m, h) in moving.iter().zip(&held) {
+        // The sway is drawn after everything else: the faces and mean poses are unchanged.
+        for (a, b) in m.frames.iter().zip(&h.frames) {
+            assert_eq!(a.activations, b.activations);
+        }
+        assert!(h.frames.iter().all(|f| f.head == h.frames[0].head));
+        let spread = (0..3)
+            .map(|k| {
+                let v: Vec<f64> = m
+                    .frames
+                    .iter()
+                    .map(|f| (f.head[k] - h.frames[0].head[k]).abs())
+                    .collect();
+                v.into_iter().fold(0.0, f64::max).to_degrees()
+            })
+            .fold(0.0, f64::max);
+        // At most 3 deg from the mean pose on any axis, and moving.
+        assert!(spread > 0.3 && spread <= 3.0 + 1e-9, "sway {spread} deg");
+    }
+    let images = clips(&subject, CohortKind::Images, &cohort.images, 1);
+    assert!(images.iter().all(|c| c.frames.len() == 1));
+}
+
+#[test]
 fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
     let source = FaceSource::default();
     let (mesh, weights) = (source.mesh().unwrap(), source.weights().unwrap());

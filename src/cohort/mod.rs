@@ -278,8 +278,14 @@ pub struct ClipParams {
     /// Peak intensity s ~ U[peak_min, peak_max] per clip.
     pub peak_min: f64,
     pub peak_max: f64,
-    /// SD of the head rotation per axis (degrees); drawn per clip (images) and held.
+    /// SD of the head rotation per axis (degrees); drawn per clip: an image's pose, a
+    /// video's mean pose.
     pub head_rotation_sd: f64,
+    /// Videos: the head sways about its mean pose, on each axis a sinusoid of amplitude
+    /// ~ U[0.5, 1] x this (degrees) at `head_motion_hz` with its own phase. 0 holds it still.
+    pub head_motion_deg: f64,
+    /// Videos: the sway's frequency (Hz).
+    pub head_motion_hz: f64,
     /// Frames per second (videos).
     pub fps: f64,
     /// Speech: syllables per second (0 for no speech).
@@ -355,6 +361,8 @@ impl Default for CohortParams {
             peak_min: 0.6,
             peak_max: 1.0,
             head_rotation_sd: 5.0,
+            head_motion_deg: 0.0,
+            head_motion_hz: 0.5,
             fps: 30.0,
             syllable_rate: 0.0,
             jaw_amplitude: 0.0,
@@ -369,6 +377,7 @@ impl Default for CohortParams {
                 subjects: 6,
                 frames: 10,
                 head_rotation_sd: 3.0,
+                head_motion_deg: 3.0,
                 ..still
             },
             talking_videos: ClipParams {
@@ -377,6 +386,7 @@ impl Default for CohortParams {
                 peak_min: 0.2,
                 peak_max: 0.5,
                 head_rotation_sd: 3.0,
+                head_motion_deg: 3.0,
                 syllable_rate: 4.5,
                 jaw_amplitude: 0.2,
                 ramp_frames: 6,
@@ -421,6 +431,17 @@ pub fn clips(subject: &Subject, kind: CohortKind, p: &ClipParams, seed: u64) -> 
             let sd = p.head_rotation_sd.to_radians();
             let head = [sd * rng.normal(), sd * rng.normal(), sd * rng.normal()];
             let phase = rng.uniform();
+            // The sway, drawn after the draws above so that they stay what they were.
+            let sway: Vec<(f64, f64)> = if kind.is_video() && p.head_motion_deg > 0.0 {
+                (0..3)
+                    .map(|_| {
+                        let amplitude = p.head_motion_deg.to_radians() * rng.range(0.5, 1.0);
+                        (amplitude, rng.range(0.0, std::f64::consts::TAU))
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            };
             let n = p.frames.max(1);
             let frames = (0..n)
                 .map(|f| {
@@ -443,6 +464,12 @@ pub fn clips(subject: &Subject, kind: CohortKind, p: &ClipParams, seed: u64) -> 
                             (s, Some(p.jaw_amplitude * open))
                         }
                     };
+                    let t = f as f64 / p.fps;
+                    let mut head = head;
+                    for (h, (amplitude, phase)) in head.iter_mut().zip(&sway) {
+                        *h += amplitude
+                            * (std::f64::consts::TAU * p.head_motion_hz * t + phase).sin();
+                    }
                     Frame {
                         activations: subject.perform(e, s, jaw),
                         head,

@@ -35,7 +35,8 @@ use crate::spec::Spec;
 use crate::stats;
 
 // 2: the expressive face and its recalibrated observer (see BASIS_VERSION in run.rs).
-const COHORT_VERSION: u32 = 2;
+// 3: video heads sway about their mean pose (cohort.*.head_motion_deg, head_motion_hz).
+const COHORT_VERSION: u32 = 3;
 const TRANSFER_VERSION: u32 = 2;
 // 3: renders show eyeballs, teeth, brows, lips and the head on a neck.
 const RENDERS_VERSION: u32 = 3;

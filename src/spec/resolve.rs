@@ -339,6 +339,12 @@ fn read_cohort(r: &mut Reader) -> Result<CohortParams, SpecError> {
             head_rotation_sd: r.float(&k("head_rotation_sd"), c.head_rotation_sd, &|v| {
                 (!(0.0..=20.0).contains(&v)).then(|| format!("= {v} must lie in [0, 20] degrees"))
             })?,
+            head_motion_deg: r.float(&k("head_motion_deg"), c.head_motion_deg, &|v| {
+                (!(0.0..=20.0).contains(&v)).then(|| format!("= {v} must lie in [0, 20] degrees"))
+            })?,
+            head_motion_hz: r.float(&k("head_motion_hz"), c.head_motion_hz, &|v| {
+                (!(v > 0.0 && v <= 10.0)).then(|| format!("= {v} must lie in (0, 10] Hz"))
+            })?,
             fps: r.float(&k("fps"), c.fps, &|v| {
                 (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
             })?,
