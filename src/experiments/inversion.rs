@@ -539,6 +539,18 @@ pub fn timing_csv(rows: &[Summary]) -> String {
     out
 }
 
+/// "1st", "2nd", "3rd", "4th", ..., "11th", "12th", "13th", "21st".
+fn ordinal(n: usize) -> String {
+    let suffix = match (n % 10, n % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{n}{suffix}")
+}
+
 pub fn markdown(rows: &[Summary], p: &InversionParams, seed: u64) -> String {
     let mut out = String::from("# Inversion: network vs optimization (Choe et al. 2001)\n\n");
     let noise: Vec<String> = CohortKind::ALL
@@ -547,7 +559,7 @@ pub fn markdown(rows: &[Summary], p: &InversionParams, seed: u64) -> String {
         .map(|r| format!("{} {:.3}", r.cohort.name().replace('_', " "), r.input_noise))
         .collect();
     out.push_str(&format!(
-        "Table 2's cohorts (every image, every {}th video frame), network of seed {seed}. Every \
+        "Table 2's cohorts (every image, every {} video frame), network of seed {seed}. Every \
          method reads one detection of each frame: the subject's 68 landmarks with Gaussian \
          noise of {} IOD on every coordinate; the landmark methods take its displacements, the \
          network and the AU fits the observer's reading of it (RMS AU noise this makes, over \
@@ -563,7 +575,7 @@ pub fn markdown(rows: &[Summary], p: &InversionParams, seed: u64) -> String {
          1e-4, at most 30 Gauss-Newton iterations each); converged: the share of frames that \
          met the test. `aus_refined` adds {} nonlinear corrections. Time per frame on one \
          worker: the method alone, then with the solve that scores it.\n\n",
-        p.frame_stride,
+        ordinal(p.frame_stride),
         p.landmark_noise_sd,
         noise.join(", "),
         p.penalty,
@@ -600,7 +612,8 @@ pub struct Output {
 
 // 3: the expressive face (see BASIS_VERSION in run.rs). 4: one noisy detection for every
 // method, scored against the clean face; Choe's linear penalty solved to convergence.
-const INVERSION_VERSION: u32 = 4;
+// 5: the caption's ordinal ("every 3rd video frame"; the markdown is cached with the stage).
+const INVERSION_VERSION: u32 = 5;
 
 /// The cached inversion stage. Its key hashes `inversion.*` and the keys of the cohort, the
 /// first seed's unified network, the dataset (normalization range) and the basis.
@@ -677,4 +690,22 @@ pub fn stage(
     )?;
     record("inversion", &key, false, t);
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn ordinals_read_as_english() {
+        let got: Vec<String> = [1, 2, 3, 4, 11, 12, 13, 21, 22, 23, 101, 111]
+            .iter()
+            .map(|&n| super::ordinal(n))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd",
+                "101st", "111th"
+            ]
+        );
+    }
 }
