@@ -101,6 +101,11 @@ impl BoxQp {
         out
     }
 
+    /// `|g| = |M^T d|`, the unit of the solvers' relative stopping tests.
+    pub fn gradient_scale(&self) -> f64 {
+        self.g.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300)
+    }
+
     /// Gradient `H a - g`.
     pub fn gradient(&self, a: &[f64]) -> Vec<f64> {
         self.hv(a)
@@ -223,7 +228,7 @@ pub fn accelerated(
     max_iterations: usize,
 ) -> Solution {
     let step = 1.0 / qp.lipschitz();
-    let scale = qp.g.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
+    let scale = qp.gradient_scale();
     let mut a: Vec<f64> = start.iter().map(|&x| bound.prox(x, 0.0)).collect();
     let mut y = a.clone();
     let mut t = 1.0f64;

@@ -165,15 +165,18 @@ impl<'a> Inverter<'a> {
 
     /// Landmark-space fit of displacements `d` (projected gradient).
     pub fn landmarks_pg(&self, d: &[f64]) -> (Activations, usize) {
-        let s = self.landmarks(d, Bound::Box);
+        let (s, _) = self.landmarks(d, Bound::Box);
         (activations(&s.a), s.iterations)
     }
 
     /// Landmark-space fit of displacements `d` under `bound`, from rest, to a proximal
-    /// gradient of 1e-6 relative (at most 20,000 iterations).
-    pub fn landmarks(&self, d: &[f64], bound: Bound) -> Solution {
+    /// gradient of 1e-6 relative (at most 20,000 iterations). Also returns the final
+    /// proximal gradient's norm relative to `|M^T d|`, the unit of that test.
+    pub fn landmarks(&self, d: &[f64], bound: Bound) -> (Solution, f64) {
         let qp = BoxQp::least_squares(&self.columns, d);
-        accelerated(&qp, bound, &vec![0.0; qp.n], 1e-6, 20_000)
+        let s = accelerated(&qp, bound, &vec![0.0; qp.n], 1e-6, 20_000);
+        let relative = s.gradient_norm / qp.gradient_scale();
+        (s, relative)
     }
 }
 
@@ -340,23 +343,18 @@ pub fn run(
                     )?);
                 }
                 // Landmark space: the box, then Choe's linear penalty.
-                let relative = |s: &Solution| {
-                    let qp = BoxQp::least_squares(&inverter.columns, &d);
-                    let scale = qp.g.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
-                    Some((s.gradient_norm / scale, s.converged))
-                };
                 for (name, bound) in [
                     ("landmarks_pg", Bound::Box),
                     ("landmarks_penalty", Bound::Penalty(p.penalty)),
                 ] {
                     let t = Instant::now();
-                    let fit = inverter.landmarks(&d, bound);
+                    let (fit, relative) = inverter.landmarks(&d, bound);
                     let seconds = t.elapsed().as_secs_f64();
                     methods.push(score(
                         name,
                         &activations(&fit.a),
                         fit.iterations,
-                        relative(&fit),
+                        Some((relative, fit.converged)),
                         seconds,
                         &mut ws,
                     )?);

@@ -327,6 +327,8 @@ fn read_cohort(r: &mut Reader) -> Result<CohortParams, SpecError> {
             &unit,
         )?,
     };
+    let degrees =
+        |v: f64| (!(0.0..=20.0).contains(&v)).then(|| format!("= {v} must lie in [0, 20] degrees"));
     let mut clip = |kind: CohortKind| -> Result<ClipParams, SpecError> {
         let c = *d.clip(kind);
         let k = |field: &str| format!("cohort.{}.{field}", kind.name());
@@ -336,12 +338,8 @@ fn read_cohort(r: &mut Reader) -> Result<CohortParams, SpecError> {
             frames: r.integer(&k("frames"), c.frames as i64, 1, frames_max)? as usize,
             peak_min: r.float(&k("peak_min"), c.peak_min, &unit)?,
             peak_max: r.float(&k("peak_max"), c.peak_max, &unit)?,
-            head_rotation_sd: r.float(&k("head_rotation_sd"), c.head_rotation_sd, &|v| {
-                (!(0.0..=20.0).contains(&v)).then(|| format!("= {v} must lie in [0, 20] degrees"))
-            })?,
-            head_motion_deg: r.float(&k("head_motion_deg"), c.head_motion_deg, &|v| {
-                (!(0.0..=20.0).contains(&v)).then(|| format!("= {v} must lie in [0, 20] degrees"))
-            })?,
+            head_rotation_sd: r.float(&k("head_rotation_sd"), c.head_rotation_sd, &degrees)?,
+            head_motion_deg: r.float(&k("head_motion_deg"), c.head_motion_deg, &degrees)?,
             head_motion_hz: r.float(&k("head_motion_hz"), c.head_motion_hz, &|v| {
                 (!(v > 0.0 && v <= 10.0)).then(|| format!("= {v} must lie in (0, 10] Hz"))
             })?,
@@ -516,9 +514,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
             (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
         })?,
         refinements: r.integer("inversion.refinements", iv.refinements as i64, 0, 20)? as usize,
-        landmark_noise_sd: r.float("inversion.landmark_noise_sd", iv.landmark_noise_sd, &|v| {
-            (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"))
-        })?,
+        landmark_noise_sd: r.float("inversion.landmark_noise_sd", iv.landmark_noise_sd, &nonneg)?,
     };
     let headpose = read_headpose(&mut r)?;
     let realfaces = read_realfaces(&mut r, &tables)?;
