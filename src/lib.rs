@@ -3,16 +3,22 @@
 //! Learning-Based Expression Transfer From Images and Videos", with the muscle-based editing
 //! of Choe, Lee & Ko 2001.
 //!
-//! Modules (see DESIGN.md 4): `sim` (the face), `observe` (landmarks), `io` (files),
-//! `report` (renders), `rng` (the only source of randomness).
+//! Modules and what each may use: `docs/architecture.md` (DESIGN 4 as amended), enforced by
+//! `tests/architecture.rs`. Leaves: `rng` (the only source of randomness), `stats`, `cache`,
+//! `invert`. Computation: `sim` (the face and the neck), `observe` (landmarks -> AUs, pose),
+//! `learn` (the MLP), `cohort`, `landmark`, `edit`, `dataset` (the training data),
+//! `headneck` (the learned neck controller). Files: `io`. Configuration: `spec`. Output:
+//! `report`. The harness: `experiments`.
 
 // Small dense matrix algebra reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
 pub mod cache;
 pub mod cohort;
+pub mod dataset;
 pub mod edit;
 pub mod experiments;
+pub mod headneck;
 pub mod invert;
 pub mod io;
 pub mod landmark;

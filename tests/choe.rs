@@ -62,7 +62,7 @@ fn landmark_inversion_recovers_the_models_own_activations() {
     assert!(got.values().iter().all(|v| (0.0..=1.0).contains(v)));
 
     // From the nonlinear face: the basis is an approximation, so the fit is too.
-    let mut ws = Workspace::new(crate::model());
+    let mut ws = Workspace::new(crate::model()).unwrap();
     let (state, _) = solve_from_rest(crate::model(), &a, &mut ws, &SolveParams::default()).unwrap();
     let l = landmarks(state.surface(crate::model().vertex_count()));
     let d: Vec<f64> = inv

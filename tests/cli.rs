@@ -150,7 +150,7 @@ fn landmark_file(path: &std::path::Path) {
 
     let m = super::model();
     let weights = read_expressions(&default_expressions_path()).unwrap();
-    let mut ws = Workspace::new(m);
+    let mut ws = Workspace::new(m).unwrap();
     let (joy, _) = solve_from_rest(
         m,
         &weights.activations(Expression::Joy, 1.0),

@@ -155,10 +155,7 @@ fn later_keys_change_nothing_for_specs_that_do_not_set_them() {
     );
     let cells = spec::load(&root().join("experiments/realfaces.toml"), &[]).unwrap();
     let s = &cells[0].spec;
-    assert_eq!(
-        s.dataset.family,
-        facelab::experiments::dataset::Family::Broad
-    );
+    assert_eq!(s.dataset.family, facelab::dataset::Family::Broad);
     assert_eq!(s.calibration, "experiments/au_observer_fit.csv");
     assert!(s.values.contains_key("realfaces.frame_stride"));
     let sweep = spec::load(&root().join("experiments/ablations/family.toml"), &[]).unwrap();

@@ -255,9 +255,9 @@ fn a_still_reaches_its_head_pose() {
 #[test]
 fn cohort_poses_transfer_through_the_neck_a_still_settles_and_a_clip_follows() {
     use facelab::cohort::{CohortKind, CohortParams};
-    use facelab::experiments::headpose::HeadposeParams;
     use facelab::experiments::pose_transfer::{errors, summarize};
     use facelab::experiments::table2::RefFrame;
+    use facelab::headneck::HeadposeParams;
     use facelab::sim::controls::CONTROL_COUNT;
     use facelab::sim::expression::Expression;
 

@@ -21,7 +21,7 @@ fn au(name: &str) -> usize {
 
 fn aus_of(a: &Activations) -> [f64; 17] {
     let m = model();
-    let mut ws = Workspace::new(m);
+    let mut ws = Workspace::new(m).unwrap();
     let (state, _) = solve_from_rest(m, a, &mut ws, &SolveParams::default()).unwrap();
     observe_state(m, &observer(), &state).unwrap().aus
 }
@@ -86,7 +86,7 @@ fn joy_reads_lip_corner_puller_highest() {
 fn head_rotation_changes_pose_not_aus() {
     let weights = read_expressions(&default_expressions_path()).unwrap();
     let m = model();
-    let mut ws = Workspace::new(m);
+    let mut ws = Workspace::new(m).unwrap();
     let (state, _) = solve_from_rest(
         m,
         &weights.activations(Expression::Surprise, 0.8),

@@ -193,7 +193,7 @@ fn the_gallery_refuses_a_face_whose_lips_pass_through_each_other() {
     ] {
         a.set(name, 1.0).unwrap();
     }
-    let mut ws = Workspace::new(&open);
+    let mut ws = Workspace::new(&open).unwrap();
     let err = valid_pose(&open, &a, &mut ws, "the test face").unwrap_err();
     let text = format!("{err:#}");
     assert!(
@@ -202,7 +202,7 @@ fn the_gallery_refuses_a_face_whose_lips_pass_through_each_other() {
     );
     // With the contact (the default model) the same face is valid.
     let m = model();
-    let mut ws = Workspace::new(m);
+    let mut ws = Workspace::new(m).unwrap();
     valid_pose(m, &a, &mut ws, "the test face").unwrap();
 }
 

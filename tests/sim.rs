@@ -14,7 +14,7 @@ use super::model;
 
 fn solve(a: &Activations) -> State {
     let m = model();
-    let mut ws = Workspace::new(m);
+    let mut ws = Workspace::new(m).unwrap();
     solve_from_rest(m, a, &mut ws, &SolveParams::default())
         .unwrap_or_else(|e| panic!("solve failed: {e}"))
         .0
@@ -132,7 +132,7 @@ fn residual_is_below_tolerance_at_return() {
     let m = model();
     let weights = read_expressions(&default_expressions_path()).unwrap();
     let s = solve(&weights.activations(Expression::Joy, 0.8));
-    let mut ws = Workspace::new(m);
+    let mut ws = Workspace::new(m).unwrap();
     let r = residual(m, &s, &mut ws);
     assert!(r <= SolveParams::default().tolerance, "residual {r:e}");
 }
@@ -153,7 +153,7 @@ fn no_inverted_elements_for_any_single_muscle_or_expression() {
     for e in Expression::ALL {
         cases.push((e.to_string(), weights.activations(e, 1.0)));
     }
-    let mut ws = Workspace::new(m);
+    let mut ws = Workspace::new(m).unwrap();
     let mut failures = Vec::new();
     for (name, a) in cases {
         match solve_from_rest(m, &a, &mut ws, &SolveParams::default()) {
@@ -187,7 +187,7 @@ fn warm_solve_through_a_buckled_path_converges() {
     let weights = read_expressions(&default_expressions_path()).unwrap();
     let samples = random_samples(&weights, 1, 21);
     let params = SolveParams::default();
-    let mut ws = Workspace::new(m);
+    let mut ws = Workspace::new(m).unwrap();
     let (mut state, _) = solve_from_rest(m, &samples[19], &mut ws, &params).unwrap();
     solve_warm(m, &samples[20], &mut state, &mut ws, &params)
         .unwrap_or_else(|e| panic!("warm solve 19 -> 20: {e}"));

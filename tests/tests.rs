@@ -1,6 +1,7 @@
 //! Integration tests, one binary (see STYLE.md): `sim` physics, the
 //! observer, OpenFace files, the command line and Table 2's transfer.
 
+mod architecture;
 mod choe;
 mod cli;
 mod harness;
@@ -10,6 +11,7 @@ mod observe;
 mod openface;
 mod reach;
 mod realfaces;
+mod robustness;
 mod sim;
 mod transfer;
 

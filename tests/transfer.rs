@@ -4,9 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use facelab::cohort::{clips, CohortKind, CohortParams, Subject, SubjectParams};
+use facelab::dataset::reader::{FaceReader, Source};
 use facelab::experiments::face::FaceSource;
 use facelab::experiments::observe::model_observer;
-use facelab::experiments::reader::{FaceReader, Source};
 use facelab::experiments::table2::{au_mse, observe_clip, transfer};
 use facelab::io::observer_fit::read_any_calibration;
 use facelab::learn::Mlp;
@@ -132,7 +132,7 @@ fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
     let mut p = cohort.images;
     p.head_rotation_sd = 0.0;
     let params = SolveParams::default();
-    let mut ws = Workspace::new(&subject.model);
+    let mut ws = Workspace::new(&subject.model).unwrap();
     let mesh_reader = FaceReader::new(Source::Mesh).unwrap();
     let mut reference = Vec::new();
     for clip in clips(&subject, CohortKind::Images, &p, 1) {

@@ -156,7 +156,7 @@ pub fn retarget(input: &Path, subjects: usize, frames: &[f64], out: &Path) -> Re
     let renders: Vec<Vec<image::RgbImage>> = faces
         .par_iter()
         .map(|(name, model)| -> Result<Vec<image::RgbImage>> {
-            let mut ws = Workspace::new(model);
+            let mut ws = Workspace::new(model)?;
             let mut out = Vec::with_capacity(sequence.len());
             let mut state = solve_from_rest(model, &sequence[0], &mut ws, &params)
                 .with_context(|| format!("{name}: frame {}", curves.frames[0]))?

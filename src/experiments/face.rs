@@ -177,7 +177,7 @@ pub fn render_to(
     let model = source.model()?;
     let weights = source.weights()?;
     let a = request.activations(&weights)?;
-    let mut ws = Workspace::new(&model);
+    let mut ws = Workspace::new(&model)?;
     let state = pose(&model, &a, &mut ws)?;
     save_png(&render(&model, &state, options), out)
 }
@@ -187,7 +187,7 @@ pub fn render_to(
 pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
     let model = source.model()?;
     let weights = source.weights()?;
-    let mut ws = Workspace::new(&model);
+    let mut ws = Workspace::new(&model)?;
     let mut written = Vec::new();
     let mut write = |state: &State, options: &RenderOptions, path: PathBuf| -> Result<()> {
         save_png(&render(&model, state, options), &path)?;

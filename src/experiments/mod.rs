@@ -1,7 +1,6 @@
 //! The harness: commands that put the simulator, the observer and the reports together.
 
 pub mod bench;
-pub mod dataset;
 pub mod editing;
 pub mod face;
 pub mod headpose;
@@ -10,7 +9,6 @@ pub mod observe;
 pub mod photos;
 pub mod pose_transfer;
 pub mod reach;
-pub mod reader;
 pub mod realfaces;
 pub mod run;
 pub mod table1;

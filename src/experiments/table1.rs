@@ -13,7 +13,7 @@ use crate::sim::controls::CONTROL_COUNT;
 use crate::sim::expression::Expression;
 use crate::stats;
 
-use super::dataset::Sample;
+use crate::dataset::Sample;
 
 /// The paper's column order.
 pub const ORDER: [Expression; 6] = [

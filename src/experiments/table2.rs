@@ -24,7 +24,7 @@ use crate::sim::{
     solve, solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, State, Workspace,
 };
 
-use super::reader::FaceReader;
+use crate::dataset::reader::FaceReader;
 
 /// The paper's 8 AUs of Table 2 (indices into `AU_NAMES`).
 pub const PAPER_AUS: [&str; 8] = [
@@ -214,7 +214,7 @@ pub fn reference(
             let subject = Subject::draw(base, face, weights, &p.subjects, p.seed, kind.name(), i)
                 .with_context(|| format!("cohort {}: subject {i}", kind.name()))?;
             let observer = reader.observer(&subject.model, calibration.clone())?;
-            let mut ws = Workspace::new(&subject.model);
+            let mut ws = Workspace::new(&subject.model)?;
             let mut frames = Vec::new();
             for clip in clips(&subject, kind, p.clip(kind), p.seed) {
                 frames.extend(observe_clip(
@@ -378,6 +378,7 @@ pub fn transfer(
         .map_init(
             || Workspace::new(model),
             |ws, (ci, acts)| -> Result<Vec<Transferred>> {
+                let ws = ws.as_mut().map_err(|e| e.clone())?;
                 let mut frames = Vec::with_capacity(acts.len());
                 solve_clip(
                     model,

@@ -12,9 +12,9 @@ use anyhow::{bail, Context, Result};
 use image::RgbImage;
 
 use super::face::FaceSource;
-use super::headpose::{face_motion, posed_face, Learned};
 use super::observe::model_observer;
 use super::table2::{au_mse, predict_activations, solve_clip};
+use crate::headneck::{face_motion, posed_face, Learned};
 use crate::io::atomic::write_atomic;
 use crate::io::openface::{parse_openface, read_openface, write_openface, FaceRow};
 use crate::learn::{Mlp, Normalization, Normalizer};
@@ -225,7 +225,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     let mut transferred = Vec::with_capacity(n);
     let mut stills: Vec<(i64, RgbImage)> = Vec::new();
     let mut frames: Vec<RgbImage> = Vec::new();
-    let mut ws = Workspace::new(&model);
+    let mut ws = Workspace::new(&model)?;
     solve_clip(
         &model,
         &acts,

@@ -66,6 +66,12 @@ pub fn read_facs(expression_aus: &Path, au_muscles: &Path) -> Result<FacsMaps, F
             line,
             message,
         };
+        if r.len() < 2 {
+            return Err(row_err(format!(
+                "{} column(s); expected 2: expression,au",
+                r.len()
+            )));
+        }
         let e: Expression = r[0].parse().map_err(|e| row_err(format!("{e}")))?;
         let au = au_index(&r[1]).ok_or_else(|| row_err(format!("unknown AU `{}`", r[1])))?;
         ex[e as usize].insert(au);
@@ -77,6 +83,12 @@ pub fn read_facs(expression_aus: &Path, au_muscles: &Path) -> Result<FacsMaps, F
             line,
             message,
         };
+        if r.len() < 2 {
+            return Err(row_err(format!(
+                "{} column(s); expected 2: au,controls",
+                r.len()
+            )));
+        }
         let a = au_index(&r[0]).ok_or_else(|| row_err(format!("unknown AU `{}`", r[0])))?;
         for c in resolve_control(&r[1]).map_err(row_err)? {
             au[a].insert(c);
@@ -95,4 +107,33 @@ pub fn read_facs(expression_aus: &Path, au_muscles: &Path) -> Result<FacsMaps, F
         expression_aus: ex.into_iter().map(|s| s.into_iter().collect()).collect(),
         au_controls: au.into_iter().map(|s| s.into_iter().collect()).collect(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A one-column table used to index past its row (a panic); it is now an error naming
+    /// the file and line.
+    #[test]
+    fn a_one_column_table_is_an_error_not_a_panic() {
+        let dir = std::env::temp_dir().join(format!("facelab-facs-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let one = dir.join("one.csv");
+        std::fs::write(&one, "expression\njoy\n").unwrap();
+        let am = data_path(DEFAULT_AU_MUSCLES);
+        let err = read_facs(&one, &am).unwrap_err().to_string();
+        assert!(
+            err.contains("one.csv:2") && err.contains("expected 2"),
+            "{err}"
+        );
+        let ea = data_path(DEFAULT_EXPRESSION_AUS);
+        std::fs::write(&one, "au\nAU12\n").unwrap();
+        let err = read_facs(&ea, &one).unwrap_err().to_string();
+        assert!(
+            err.contains("one.csv:2") && err.contains("expected 2"),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

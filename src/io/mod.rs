@@ -12,17 +12,57 @@ pub mod observer_fit;
 pub mod openface;
 pub mod photo;
 pub mod reach;
+pub mod realdata;
 
 use std::path::{Path, PathBuf};
 
-/// A data file of the checkout (`rel` from its root): in the working folder if it is there,
-/// else beside the crate's sources, so the binary works from any folder of the checkout.
+static DATA_ROOT: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+/// Whether `dir` is a facelab checkout (or a copy of its data): it holds `experiments/` and
+/// `assets/face/`.
+fn is_root(dir: &Path) -> bool {
+    dir.join("experiments").is_dir() && dir.join("assets/face").is_dir()
+}
+
+/// The first of `start` and its ancestors that is a checkout (`experiments/` and
+/// `assets/face/`).
+pub fn find_root(start: &Path) -> Option<PathBuf> {
+    let start = std::path::absolute(start).ok()?;
+    start
+        .ancestors()
+        .find(|d| is_root(d))
+        .map(Path::to_path_buf)
+}
+
+/// Sets the checkout the data files are read from when the working folder is not in one
+/// (the command line passes the spec's folder). The first call wins.
+pub fn set_data_root(dir: &Path) {
+    if let Some(root) = find_root(dir) {
+        let _ = DATA_ROOT.set(root);
+    }
+}
+
+/// The checkout data files resolve against: the working folder's (walking up), else the one
+/// `set_data_root` found.
+pub fn data_root() -> Option<PathBuf> {
+    std::env::current_dir()
+        .ok()
+        .and_then(|d| find_root(&d))
+        .or_else(|| DATA_ROOT.get().cloned())
+}
+
+/// A data file of the checkout (`rel` from its root, or absolute): as given if it exists from
+/// the working folder, else under `data_root()`. The binary reads nothing from where it was
+/// built, so a copy of it works from any folder of any checkout. When the file is nowhere the
+/// path is returned as given, and the error that reads it names it.
 pub fn data_path(rel: &str) -> PathBuf {
     let local = PathBuf::from(rel);
-    if local.exists() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+    if local.exists() || local.is_absolute() {
+        return local;
+    }
+    match data_root() {
+        Some(root) if root.join(rel).exists() => root.join(rel),
+        _ => local,
     }
 }
 

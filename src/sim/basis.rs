@@ -35,7 +35,7 @@ impl LinearBasis {
     /// Solves the model once per control at full activation (slide, twist at 1.0).
     pub fn build(model: &FaceModel, params: &SolveParams) -> Result<LinearBasis, SolveError> {
         let rest = model.tissue.rest.clone();
-        let mut ws = Workspace::new(model);
+        let mut ws = Workspace::new(model)?;
         let mut fields = Vec::with_capacity(AUXILIARY);
         for index in 0..AUXILIARY {
             let mut a = Activations::neutral();

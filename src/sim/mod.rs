@@ -12,6 +12,7 @@ pub mod mesh;
 pub mod model;
 pub mod muscles;
 pub mod neck;
+pub mod pose;
 pub mod rig;
 pub mod solver;
 pub mod tissue;

@@ -5,18 +5,24 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use super::raw::{set_path, Node, Origin, Value};
-use super::SpecError;
-use crate::cohort::{ClipParams, CohortKind, CohortParams, SubjectParams};
-use crate::experiments::dataset::{DatasetParams, Family, SolveStart};
-use crate::experiments::headpose::HeadposeParams;
-use crate::experiments::inversion::InversionParams;
-use crate::experiments::reader::Source;
-use crate::experiments::realfaces::RealfacesParams;
+use crate::cohort::CohortParams;
+use crate::dataset::reader::Source;
+use crate::dataset::{DatasetParams, Family, SolveStart};
+use crate::headneck::HeadposeParams;
+use crate::invert::InversionParams;
 use crate::io::calibration::DEFAULT_CALIBRATION;
+use crate::io::realdata::RealfacesParams;
 use crate::learn::params::{ModelParams, Normalization, TrainParams};
 use crate::observe::ObserverNoise;
 use crate::sim::controls::edit_distance;
+use crate::spec::raw::{Node, Value};
+use crate::spec::SpecError;
+
+mod sections;
+mod sweep;
+
+use sections::*;
+pub use sweep::cells;
 
 /// The tables a spec can ask for.
 pub const TABLES: [&str; 5] = ["table1", "table2", "inversion", "headpose", "realfaces"];
@@ -96,6 +102,21 @@ impl Spec {
     /// AUs and a real file's are on the same scale.
     pub fn reads_on_openface_scale(&self) -> bool {
         self.calibration == crate::io::observer_fit::DEFAULT_READOUT
+    }
+
+    /// The values under the given dotted prefixes as canonical `key = value` lines, the text
+    /// a stage's cache key hashes: `except` keys left out, `zeroed` keys read as 0.
+    pub fn values_text(&self, prefixes: &[&str], except: &[&str], zeroed: &[&str]) -> String {
+        let mut values = self.values.clone();
+        for k in zeroed {
+            values.insert(k.to_string(), toml::Value::Float(0.0));
+        }
+        values
+            .iter()
+            .filter(|(k, _)| prefixes.iter().any(|p| k.starts_with(p)))
+            .filter(|(k, _)| !except.contains(&k.as_str()))
+            .map(|(k, v)| format!("{k} = {v}\n"))
+            .collect()
     }
 }
 
@@ -290,92 +311,6 @@ impl<'a> Reader<'a> {
     }
 }
 
-fn read_cohort(r: &mut Reader) -> Result<CohortParams, SpecError> {
-    let d = CohortParams::default();
-    let nonneg = |v: f64| (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"));
-    let unit = |v: f64| (!(0.0..=1.0).contains(&v)).then(|| format!("= {v} must lie in [0, 1]"));
-    let s = d.subjects;
-    let subjects = SubjectParams {
-        face_width_sd: r.float("cohort.subjects.face_width_sd", s.face_width_sd, &nonneg)?,
-        brow_height_sd: r.float("cohort.subjects.brow_height_sd", s.brow_height_sd, &nonneg)?,
-        nose_sd: r.float("cohort.subjects.nose_sd", s.nose_sd, &nonneg)?,
-        jaw_length_sd: r.float("cohort.subjects.jaw_length_sd", s.jaw_length_sd, &nonneg)?,
-        lip_thickness_sd: r.float(
-            "cohort.subjects.lip_thickness_sd",
-            s.lip_thickness_sd,
-            &nonneg,
-        )?,
-        strength_median: r.float("cohort.subjects.strength_median", s.strength_median, &|v| {
-            (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
-        })?,
-        strength_sd: r.float("cohort.subjects.strength_sd", s.strength_sd, &nonneg)?,
-        muscle_strength_sd: r.float(
-            "cohort.subjects.muscle_strength_sd",
-            s.muscle_strength_sd,
-            &nonneg,
-        )?,
-        stiffness_sd: r.float("cohort.subjects.stiffness_sd", s.stiffness_sd, &nonneg)?,
-        weight_sd: r.float("cohort.subjects.weight_sd", s.weight_sd, &nonneg)?,
-        extra_muscle_probability: r.float(
-            "cohort.subjects.extra_muscle_probability",
-            s.extra_muscle_probability,
-            &unit,
-        )?,
-        extra_muscle_weight: r.float(
-            "cohort.subjects.extra_muscle_weight",
-            s.extra_muscle_weight,
-            &unit,
-        )?,
-    };
-    let degrees =
-        |v: f64| (!(0.0..=20.0).contains(&v)).then(|| format!("= {v} must lie in [0, 20] degrees"));
-    let mut clip = |kind: CohortKind| -> Result<ClipParams, SpecError> {
-        let c = *d.clip(kind);
-        let k = |field: &str| format!("cohort.{}.{field}", kind.name());
-        let frames_max = if kind.is_video() { 100_000 } else { 1 };
-        let p = ClipParams {
-            subjects: r.integer(&k("subjects"), c.subjects as i64, 1, 10_000)? as usize,
-            frames: r.integer(&k("frames"), c.frames as i64, 1, frames_max)? as usize,
-            peak_min: r.float(&k("peak_min"), c.peak_min, &unit)?,
-            peak_max: r.float(&k("peak_max"), c.peak_max, &unit)?,
-            head_rotation_sd: r.float(&k("head_rotation_sd"), c.head_rotation_sd, &degrees)?,
-            head_motion_deg: r.float(&k("head_motion_deg"), c.head_motion_deg, &degrees)?,
-            head_motion_hz: r.float(&k("head_motion_hz"), c.head_motion_hz, &|v| {
-                (!(v > 0.0 && v <= 10.0)).then(|| format!("= {v} must lie in (0, 10] Hz"))
-            })?,
-            fps: r.float(&k("fps"), c.fps, &|v| {
-                (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
-            })?,
-            syllable_rate: r.float(&k("syllable_rate"), c.syllable_rate, &nonneg)?,
-            jaw_amplitude: r.float(&k("jaw_amplitude"), c.jaw_amplitude, &unit)?,
-            ramp_frames: r.integer(&k("ramp_frames"), c.ramp_frames as i64, 1, 100_000)? as usize,
-        };
-        if p.peak_min > p.peak_max {
-            let key = k("peak_min");
-            let node = r.get(&key).or_else(|| r.get(&k("peak_max")));
-            if let Some(node) = node {
-                return Err(r.invalid(
-                    node,
-                    &key,
-                    format!("= {} exceeds peak_max = {}", p.peak_min, p.peak_max),
-                ));
-            }
-        }
-        Ok(p)
-    };
-    let images = clip(CohortKind::Images)?;
-    let onset_videos = clip(CohortKind::OnsetVideos)?;
-    let talking_videos = clip(CohortKind::TalkingVideos)?;
-    Ok(CohortParams {
-        seed: r.integer("cohort.seed", d.seed as i64, 0, i64::MAX)? as u64,
-        noise_sd: r.float("cohort.noise_sd", d.noise_sd, &nonneg)?,
-        subjects,
-        images,
-        onset_videos,
-        talking_videos,
-    })
-}
-
 /// Reads one cell's tree.
 pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecError> {
     let mut r = Reader {
@@ -568,187 +503,4 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         realfaces,
         values,
     })
-}
-
-/// `[realfaces]`: read (and recorded) only when `tables` lists "realfaces", so other specs'
-/// values stay as they were.
-fn read_realfaces(r: &mut Reader, tables: &[String]) -> Result<RealfacesParams, SpecError> {
-    let d = RealfacesParams::default();
-    let files = r.data_file("realfaces.files", &d.files)?;
-    let data = match r.get("realfaces.data") {
-        None => None,
-        Some(node) => match &node.value {
-            Value::String(s) => {
-                r.values
-                    .insert("realfaces.data".into(), toml::Value::String(s.clone()));
-                Some(s.clone())
-            }
-            other => {
-                return Err(r.invalid(
-                    node,
-                    "realfaces.data",
-                    format!("must be a string (a folder), not {}", other.type_name()),
-                ))
-            }
-        },
-    };
-    let frame_stride =
-        r.integer("realfaces.frame_stride", d.frame_stride as i64, 1, 100_000)? as usize;
-    if !tables.iter().any(|t| t == "realfaces") {
-        for key in [
-            "realfaces.files",
-            "realfaces.data",
-            "realfaces.frame_stride",
-        ] {
-            r.forget_if_unset(key);
-        }
-    }
-    Ok(RealfacesParams {
-        files,
-        data,
-        frame_stride,
-    })
-}
-
-fn read_headpose(r: &mut Reader) -> Result<HeadposeParams, SpecError> {
-    let d = HeadposeParams::default();
-    let positive =
-        |v: f64| (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"));
-    let degrees = |limit: f64| {
-        move |v: f64| {
-            (!(0.0..=limit).contains(&v)).then(|| format!("= {v} must lie in [0, {limit}]"))
-        }
-    };
-    Ok(HeadposeParams {
-        seed: r.integer("headpose.seed", d.seed as i64, 0, i64::MAX)? as u64,
-        fit_targets: r.integer("headpose.fit_targets", d.fit_targets as i64, 2, 1_000_000)?
-            as usize,
-        poses_per_target: r.integer(
-            "headpose.poses_per_target",
-            d.poses_per_target as i64,
-            1,
-            10_000,
-        )? as usize,
-        test_fraction: r.float("headpose.test_fraction", d.test_fraction, &|v| {
-            (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
-        })?,
-        model: ModelParams {
-            layers: r.integer("headpose.layers", d.model.layers as i64, 1, 16)? as usize,
-            width: r.integer("headpose.width", d.model.width as i64, 1, 4096)? as usize,
-        },
-        train: TrainParams {
-            learning_rate: r.float("headpose.learning_rate", d.train.learning_rate, &positive)?,
-            batch_size: r.integer(
-                "headpose.batch_size",
-                d.train.batch_size as i64,
-                1,
-                1_000_000,
-            )? as usize,
-            epochs: r.integer("headpose.epochs", d.train.epochs as i64, 1, 100_000)? as usize,
-            normalization: d.train.normalization,
-        },
-        // The neck's commanded range is (40, 50, 30): targets beyond it would be clamped.
-        range_degrees: [
-            r.float("headpose.pitch_degrees", d.range_degrees[0], &degrees(40.0))?,
-            r.float("headpose.yaw_degrees", d.range_degrees[1], &degrees(50.0))?,
-            r.float("headpose.roll_degrees", d.range_degrees[2], &degrees(30.0))?,
-        ],
-        duration: r.float("headpose.duration", d.duration, &|v| {
-            (!(0.6..=60.0).contains(&v)).then(|| format!("= {v} must lie in [0.6, 60] s"))
-        })?,
-        settle_degrees: r.float("headpose.settle_degrees", d.settle_degrees, &positive)?,
-        sequence_seconds: r.float("headpose.sequence_seconds", d.sequence_seconds, &|v| {
-            (!(1.0..=60.0).contains(&v)).then(|| format!("= {v} must lie in [1, 60] s"))
-        })?,
-        reflex: crate::sim::neck::ReflexParams {
-            strain_gain: r.float("headpose.strain_gain", d.reflex.strain_gain, &|v| {
-                (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"))
-            })?,
-            rate_gain: r.float("headpose.rate_gain", d.reflex.rate_gain, &|v| {
-                (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"))
-            })?,
-        },
-    })
-}
-
-/// Flattens `[sweep]` into dotted keys with their value lists.
-fn sweep_axes(sweep: &Node, prefix: &str, out: &mut Vec<(String, Node)>) -> Result<(), SpecError> {
-    match &sweep.value {
-        Value::Table(t) => {
-            for (k, v) in t {
-                let key = if prefix.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                sweep_axes(v, &key, out)?;
-            }
-            Ok(())
-        }
-        Value::Array(items) if !items.is_empty() => {
-            out.push((prefix.to_string(), sweep.clone()));
-            Ok(())
-        }
-        _ => Err(SpecError::Invalid {
-            origin: sweep.origin.clone(),
-            key: format!("sweep.{prefix}"),
-            message: "must be a non-empty list of values".into(),
-        }),
-    }
-}
-
-/// Expands `[sweep]` as a grid (keys in sorted order, values in file order) and resolves each
-/// cell. A sweep key that no stage reads is an unknown key at the sweep's line.
-pub fn cells(mut tree: BTreeMap<String, Node>, file: &Path) -> Result<Vec<Cell>, SpecError> {
-    let Some(sweep) = tree.remove("sweep") else {
-        return Ok(vec![Cell {
-            name: String::new(),
-            spec: resolve(&tree, file)?,
-        }]);
-    };
-    let mut axes = Vec::new();
-    sweep_axes(&sweep, "", &mut axes)?;
-    let mut grid: Vec<Vec<(String, Node)>> = vec![Vec::new()];
-    for (key, list) in &axes {
-        let Value::Array(items) = &list.value else {
-            unreachable!("sweep_axes keeps arrays")
-        };
-        let mut next = Vec::new();
-        for cell in &grid {
-            for item in items {
-                let mut c = cell.clone();
-                let origin = match &item.origin {
-                    Origin::File { path, line, column } => Origin::Sweep {
-                        path: path.clone(),
-                        line: *line,
-                        column: *column,
-                    },
-                    other => other.clone(),
-                };
-                c.push((
-                    key.clone(),
-                    Node {
-                        value: item.value.clone(),
-                        origin,
-                    },
-                ));
-                next.push(c);
-            }
-        }
-        grid = next;
-    }
-    let mut out = Vec::with_capacity(grid.len());
-    for cell in grid {
-        let mut t = tree.clone();
-        let mut name = Vec::new();
-        for (key, node) in cell {
-            name.push(format!("{key}={}", node.to_toml()));
-            set_path(&mut t, &key, node)?;
-        }
-        out.push(Cell {
-            name: name.join(","),
-            spec: resolve(&t, file)?,
-        });
-    }
-    Ok(out)
 }

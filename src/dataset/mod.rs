@@ -117,7 +117,8 @@ impl Default for DatasetParams {
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 
-use super::reader::FaceReader;
+pub mod reader;
+
 use crate::observe::{Observer, ObserverNoise, AU_COUNT, AU_NAMES};
 use crate::rng::stream;
 use crate::rng::Stream;
@@ -130,6 +131,7 @@ use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::muscles::{Side, MUSCLE_PAIRS};
 use crate::sim::solver::solve_predicted;
 use crate::sim::{solve_from_rest, Activations, FaceModel, SolveParams, Workspace};
+use reader::FaceReader;
 
 /// One training pair.
 #[derive(Clone, Debug, PartialEq)]
@@ -172,6 +174,7 @@ pub fn generate(
         .map_init(
             || Workspace::new(model),
             |ws, &(e, index)| -> Result<Sample> {
+                let ws = ws.as_mut().map_err(|e| e.clone())?;
                 let mut rng = stream(seed, &format!("dataset/{e}/{index}"));
                 let (scale, a) = draw(params.family, weights, au_controls, e, &mut rng);
                 let jaw = a.get(JAW_ROTATION);

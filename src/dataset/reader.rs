@@ -134,7 +134,7 @@ mod tests {
     fn joy(model: &FaceModel) -> State {
         let weights = FaceSource::default().weights().unwrap();
         let a = weights.sample(Expression::Joy, 1.0, 0.0);
-        let mut ws = Workspace::new(model);
+        let mut ws = Workspace::new(model).unwrap();
         solve_from_rest(model, &a, &mut ws, &SolveParams::default())
             .unwrap()
             .0

@@ -1,0 +1,306 @@
+//! `facelab bench solve`: the face's equilibrium solves, cold, warm and from the basis.
+
+use crate::experiments::face::FaceSource;
+use crate::experiments::observe::median;
+use crate::sim::basis::LinearBasis;
+use crate::sim::solver::{iteration_cost, softest_mode, solve_predicted, SoftMode};
+use crate::sim::{solve, solve_from_rest, SolveParams, Workspace};
+use anyhow::Result;
+use std::io::Write;
+use std::time::Instant;
+
+use super::*;
+
+pub fn bench_solve(
+    source: &FaceSource,
+    levels: &[u8],
+    samples: usize,
+    seed: u64,
+    params: &SolveParams,
+    out: &mut impl Write,
+) -> Result<()> {
+    let weights = source.weights()?;
+    let params = *params;
+    for &level in levels {
+        let model = FaceSource {
+            subdivisions: level,
+            ..source.clone()
+        }
+        .model()?;
+        let p = format!("solve.nonlinear.sub{level}");
+        let n = model.vertex_count();
+        line(out, &format!("{p}.surface_vertices"), n as f64, "count")?;
+        line(
+            out,
+            &format!("{p}.free_nodes"),
+            model.free.iter().filter(|&&f| f).count() as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.springs"),
+            model.tissue.springs.len() as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.prisms"),
+            model.tissue.prisms.len() as f64,
+            "count",
+        )?;
+        let count = if level == 0 {
+            samples
+        } else {
+            (samples / 5).max(3)
+        };
+        let batch = random_samples(&weights, seed, count);
+        let t = Instant::now();
+        let mut ws = Workspace::new(&model)?;
+        line(
+            out,
+            &format!("{p}.setup_ms"),
+            t.elapsed().as_secs_f64() * 1e3,
+            "ms",
+        )?;
+
+        // Cold: each sample from rest by continuation.
+        let mut cold_iterations = 0;
+        let mut states = Vec::with_capacity(count);
+        let t = Instant::now();
+        for a in &batch {
+            let (state, r) = solve_from_rest(&model, a, &mut ws, &params)?;
+            cold_iterations += r.iterations;
+            states.push(state);
+        }
+        let cold = t.elapsed().as_secs_f64() / count as f64;
+        line(out, &format!("{p}.cold_ms_per_sample"), cold * 1e3, "ms")?;
+        line(
+            out,
+            &format!("{p}.cold_iterations_per_sample"),
+            cold_iterations as f64 / count as f64,
+            "count",
+        )?;
+
+        // Warm: each sample from the previous sample's equilibrium.
+        let mut state = model.rest_state();
+        let mut warm_iterations = 0;
+        let t = Instant::now();
+        for a in &batch {
+            let r = solve(&model, a, &mut state, &mut ws, &params)?;
+            warm_iterations += r.iterations;
+        }
+        let warm = t.elapsed().as_secs_f64() / count as f64;
+        line(out, &format!("{p}.warm_ms_per_sample"), warm * 1e3, "ms")?;
+        line(
+            out,
+            &format!("{p}.warm_iterations_per_sample"),
+            warm_iterations as f64 / count as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.warm_ms_per_iteration"),
+            warm * 1e3 * count as f64 / warm_iterations.max(1) as f64,
+            "ms",
+        )?;
+
+        // Where an iteration's time goes, at the first equilibria of the batch.
+        let probes = &states[..states.len().min(10)];
+        let (mut assemble, mut factorize, mut energy) = (0.0, 0.0, 0.0);
+        for s in probes {
+            let c = iteration_cost(&model, s, &mut ws, 5);
+            assemble += c.assemble / probes.len() as f64;
+            factorize += c.factorize / probes.len() as f64;
+            energy += c.energy / probes.len() as f64;
+        }
+        line(
+            out,
+            &format!("{p}.hessian_nonzeros"),
+            ws.hessian_nonzeros() as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.factor_nonzeros"),
+            ws.factor_nonzeros() as f64,
+            "count",
+        )?;
+        line(out, &format!("{p}.assemble_ms"), assemble * 1e3, "ms")?;
+        line(
+            out,
+            &format!("{p}.factorize_solve_ms"),
+            factorize * 1e3,
+            "ms",
+        )?;
+        line(out, &format!("{p}.energy_ms"), energy * 1e3, "ms")?;
+
+        // The softest mode of every returned face: a negative one marks a saddle of the
+        // energy, not a stable equilibrium.
+        let mut springs: Vec<f64> = model.tissue.springs.iter().map(|s| s.k).collect();
+        line(
+            out,
+            &format!("{p}.spring_stiffness_median_n_per_m"),
+            median(&mut springs),
+            "N/m",
+        )?;
+        let modes: Vec<SoftMode> = states
+            .iter()
+            .filter_map(|s| softest_mode(&model, s, &mut ws, true, 80))
+            .collect();
+        let mut stiffness: Vec<f64> = modes.iter().map(|m| m.stiffness).collect();
+        let mut saddle_share: Vec<f64> = modes
+            .iter()
+            .filter(|m| m.stiffness < 0.0)
+            .map(|m| m.vertex_share)
+            .collect();
+        line(
+            out,
+            &format!("{p}.saddles"),
+            saddle_share.len() as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.saddle_mode_vertex_share_median"),
+            median(&mut saddle_share),
+            "fraction",
+        )?;
+        line(
+            out,
+            &format!("{p}.softest_mode_min_n_per_m"),
+            stiffness.iter().copied().fold(f64::INFINITY, f64::min),
+            "N/m",
+        )?;
+        line(
+            out,
+            &format!("{p}.softest_mode_median_n_per_m"),
+            median(&mut stiffness),
+            "N/m",
+        )?;
+
+        // Linear basis, and solves started from its prediction.
+        let t = Instant::now();
+        let basis = LinearBasis::build(&model, &params)?;
+        line(
+            out,
+            &format!("solve.linear.sub{level}.build_s"),
+            t.elapsed().as_secs_f64(),
+            "s",
+        )?;
+        let mut predicted_iterations = Vec::with_capacity(count);
+        let mut fallbacks = 0;
+        let mut predicted_states = Vec::with_capacity(count);
+        let t = Instant::now();
+        for a in &batch {
+            let (state, r) = solve_predicted(&model, &basis, a, &mut ws, &params)?;
+            predicted_iterations.push(r.iterations as f64);
+            // More than one piece: Newton from the prediction failed and the solve went
+            // the continuation path from rest.
+            fallbacks += usize::from(r.pieces > 1);
+            predicted_states.push(state);
+        }
+        let predicted = t.elapsed().as_secs_f64() / count as f64;
+        line(
+            out,
+            &format!("{p}.predicted_ms_per_sample"),
+            predicted * 1e3,
+            "ms",
+        )?;
+        line(
+            out,
+            &format!("{p}.predicted_iterations_per_sample"),
+            predicted_iterations.iter().sum::<f64>() / count as f64,
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.predicted_iterations_median"),
+            median(&mut predicted_iterations),
+            "count",
+        )?;
+        line(
+            out,
+            &format!("{p}.predicted_fallbacks_to_continuation"),
+            fallbacks as f64,
+            "count",
+        )?;
+        let mut apart = 0.0f64;
+        for (a, b) in predicted_states.iter().zip(&states) {
+            apart = apart.max(landmark_error(a.surface(n), b.surface(n)).1);
+        }
+        line(
+            out,
+            &format!("{p}.predicted_vs_cold_landmark_max_mm"),
+            apart * 1e3,
+            "mm",
+        )?;
+
+        // How far the returned faces are from a 100x tighter solve of the same activations.
+        let tight = SolveParams {
+            tolerance: params.tolerance * 1e-2,
+            ..params
+        };
+        let mut drift = 0.0f64;
+        for s in &states {
+            let mut refined = s.clone();
+            solve(&model, &s.activations, &mut refined, &mut ws, &tight)?;
+            drift = drift.max(landmark_error(refined.surface(n), s.surface(n)).1);
+        }
+        line(
+            out,
+            &format!("{p}.tolerance_landmark_drift_max_mm"),
+            drift * 1e3,
+            "mm",
+        )?;
+
+        let mut surface = Vec::new();
+        let repeats = 200;
+        let t = Instant::now();
+        for _ in 0..repeats {
+            for a in &batch {
+                basis.evaluate(a, &mut surface);
+                std::hint::black_box(&surface);
+            }
+        }
+        let per = t.elapsed().as_secs_f64() / (repeats * count) as f64;
+        line(
+            out,
+            &format!("solve.linear.sub{level}.us_per_sample"),
+            per * 1e6,
+            "us",
+        )?;
+        let (mut mean, mut max) = (0.0, 0.0f64);
+        for (a, s) in batch.iter().zip(&states) {
+            basis.evaluate(a, &mut surface);
+            let (m, x) = landmark_error(&surface, s.surface(n));
+            mean += m / count as f64;
+            max = max.max(x);
+        }
+        line(
+            out,
+            &format!("solve.linear.sub{level}.landmark_error_mean_mm"),
+            mean * 1e3,
+            "mm",
+        )?;
+        line(
+            out,
+            &format!("solve.linear.sub{level}.landmark_error_max_mm"),
+            max * 1e3,
+            "mm",
+        )?;
+        let rest = model.rest_state();
+        let motion: f64 = states
+            .iter()
+            .map(|s| landmark_error(s.surface(n), rest.surface(n)).0)
+            .sum::<f64>()
+            / count as f64;
+        line(
+            out,
+            &format!("solve.nonlinear.sub{level}.landmark_motion_mean_mm"),
+            motion * 1e3,
+            "mm",
+        )?;
+        out.flush()?;
+    }
+    Ok(())
+}

@@ -1,0 +1,261 @@
+//! Table 2's stages in a run (cohort -> transfer per seed -> renders) and its reports.
+//!
+//! Stage keys hash, besides the stage name and version:
+//! - `cohort`: the face assets, expression and calibration files, `dataset.subdivisions`,
+//!   `dataset.tolerance`, `cohort.*`;
+//! - `transfer` (per seed): `table2.normalization` and the keys of the cohort, the seed's
+//!   unified network, the dataset (its AU range) and the basis;
+//! - `renders`: the first seed's transfer key.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+
+use crate::cache::{self, Cache};
+use crate::cohort::CohortKind;
+use crate::dataset::reader::FaceReader;
+use crate::dataset::Sample;
+use crate::experiments::face::FaceSource;
+use crate::experiments::table2::{
+    self, clip_count, clip_ranges, range_map, reference, reference_csv, reference_from_csv,
+    training_range, transfer, transfers_csv, transfers_from_csv, RefFrame, Row, Setting,
+    Transferred,
+};
+use crate::learn::Mlp;
+use crate::observe::{Calibration, AU_COUNT};
+use crate::sim::basis::LinearBasis;
+use crate::sim::{FaceModel, SolveParams};
+use crate::spec::Spec;
+
+mod renders;
+mod report;
+
+use renders::*;
+pub use report::{bars, csv, frames_csv, markdown, sweep_figure, sweep_markdown, tex};
+
+// 2: the expressive face and its recalibrated observer (see BASIS_VERSION in run/mod.rs).
+// 3: video heads sway about their mean pose (cohort.*.head_motion_deg, head_motion_hz).
+const COHORT_VERSION: u32 = 3;
+const TRANSFER_VERSION: u32 = 2;
+// 3: renders show eyeballs, teeth, brows, lips and the head on a neck.
+const RENDERS_VERSION: u32 = 3;
+
+/// What Table 2 needs from the rest of the cell.
+pub struct Inputs<'a> {
+    pub spec: &'a Spec,
+    pub source: &'a FaceSource,
+    /// `face=...\ndata=...\n` (asset hashes).
+    pub assets: String,
+    pub dataset_key: &'a str,
+    pub basis_key: Option<&'a str>,
+    /// Per seed: the unified network's train key and network.
+    pub unified: Vec<(u64, String, &'a Mlp)>,
+    pub samples: &'a [Sample],
+    pub model: &'a FaceModel,
+    pub basis: Option<&'a LinearBasis>,
+    pub calibration: &'a Calibration,
+}
+
+pub struct Table2Result {
+    pub cohort_key: String,
+    pub rows: Vec<Row>,
+    pub reference: Vec<RefFrame>,
+    /// The first seed's transfers, per setting, aligned with `reference`.
+    pub first: Vec<(Setting, Vec<Transferred>)>,
+    /// Renders: (file name, bytes).
+    pub renders: Vec<(String, Vec<u8>)>,
+}
+
+type Record<'r> = &'r mut dyn FnMut(&str, &str, bool, Instant);
+
+pub fn run(
+    inp: &Inputs,
+    cache: &Cache,
+    record: Record,
+    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
+) -> Result<Table2Result> {
+    let spec = inp.spec;
+    let values = |prefixes: &[&str]| crate::experiments::run::values_text(spec, prefixes);
+    let params = SolveParams {
+        tolerance: spec.dataset.tolerance,
+        ..SolveParams::default()
+    };
+
+    // Cohort: the reference frames.
+    let cohort_key = cache::key(
+        "cohort",
+        COHORT_VERSION,
+        &format!(
+            "{}{}",
+            inp.assets,
+            values(&[
+                "cohort.",
+                "observer.source",
+                "dataset.subdivisions",
+                "dataset.tolerance",
+                "dataset.shear_modulus_fraction"
+            ])
+        ),
+        &[],
+    );
+    let reader = FaceReader::new(spec.observer_source)?;
+    let t = Instant::now();
+    let reference_frames = match cache.get("cohort", &cohort_key)? {
+        Some(e) => {
+            let text = String::from_utf8(e.read("reference.csv")?)?;
+            let r = reference_from_csv(&text, &e.path("reference.csv").display().to_string())?;
+            record("cohort", &cohort_key, true, t);
+            r
+        }
+        None => {
+            let kinds = CohortKind::ALL;
+            let progress = bar(clip_count(&spec.cohort, &kinds) as u64, "cohort");
+            let tick = || progress.inc(1);
+            let r = reference(
+                &inp.source.mesh()?,
+                inp.source.params(),
+                &inp.source.weights()?,
+                inp.calibration,
+                &reader,
+                &spec.cohort,
+                &kinds,
+                &params,
+                &tick,
+            )?;
+            progress.finish_and_clear();
+            cache.put(
+                "cohort",
+                &cohort_key,
+                &[("reference.csv".into(), reference_csv(&r).into_bytes())],
+            )?;
+            record("cohort", &cohort_key, false, t);
+            r
+        }
+    };
+
+    let observer = reader.observer(inp.model, inp.calibration.clone())?;
+    let training: Vec<[f64; AU_COUNT]> = inp.samples.iter().map(|s| s.aus).collect();
+    let target = training_range(spec.table2_normalization, &training);
+    let clips = clip_ranges(&reference_frames);
+
+    // Transfer, per seed.
+    let mut rows = Vec::new();
+    let mut first = None;
+    let mut first_key = String::new();
+    for (seed, train_key, mlp) in &inp.unified {
+        let mut inputs = vec![cohort_key.as_str(), train_key.as_str(), inp.dataset_key];
+        inputs.extend(inp.basis_key);
+        let key = cache::key("transfer", TRANSFER_VERSION, &values(&["table2."]), &inputs);
+        let t = Instant::now();
+        let transfers = match cache.get("transfer", &key)? {
+            Some(e) => {
+                let text = String::from_utf8(e.read("transfers.csv")?)?;
+                let r = transfers_from_csv(&text, &e.path("transfers.csv").display().to_string())?;
+                record("transfer", &key, true, t);
+                r
+            }
+            None => {
+                let progress = bar(2 * clips.len() as u64, &format!("transfer {seed}"));
+                let tick = || progress.inc(1);
+                let mut out = Vec::new();
+                for setting in Setting::ALL {
+                    let mut frames: Vec<Transferred> = Vec::with_capacity(reference_frames.len());
+                    for kind in CohortKind::ALL {
+                        let mine: Vec<&std::ops::Range<usize>> = clips
+                            .iter()
+                            .filter(|r| reference_frames[r.start].cohort == kind)
+                            .collect();
+                        let aus: Vec<Vec<[f64; AU_COUNT]>> = mine
+                            .iter()
+                            .map(|r| {
+                                reference_frames[(*r).clone()]
+                                    .iter()
+                                    .map(|f| f.aus)
+                                    .collect()
+                            })
+                            .collect();
+                        let all: Vec<[f64; AU_COUNT]> = aus.iter().flatten().copied().collect();
+                        let map = (setting == Setting::Normalized)
+                            .then(|| range_map(spec.table2_normalization, &all, &target));
+                        let t = transfer(
+                            inp.model,
+                            inp.basis,
+                            &reader,
+                            &observer,
+                            mlp,
+                            map.as_ref(),
+                            &aus,
+                            &params,
+                            &tick,
+                        )
+                        .with_context(|| {
+                            format!("Table 2, seed {seed}: {} {}", kind.name(), setting.name())
+                        })?;
+                        frames.extend(t.into_iter().flatten());
+                    }
+                    out.push((setting, frames));
+                }
+                progress.finish_and_clear();
+                cache.put(
+                    "transfer",
+                    &key,
+                    &[("transfers.csv".into(), transfers_csv(&out).into_bytes())],
+                )?;
+                record("transfer", &key, false, t);
+                out
+            }
+        };
+        for (setting, frames) in &transfers {
+            for kind in CohortKind::ALL {
+                let idx: Vec<usize> = (0..reference_frames.len())
+                    .filter(|&i| reference_frames[i].cohort == kind)
+                    .collect();
+                let r: Vec<_> = idx.iter().map(|&i| reference_frames[i].aus).collect();
+                let t: Vec<_> = idx.iter().map(|&i| frames[i].aus).collect();
+                rows.push(Row {
+                    seed: *seed,
+                    cohort: kind,
+                    setting: *setting,
+                    mse: table2::au_mse(&r, &t),
+                });
+            }
+        }
+        if first.is_none() {
+            first = Some(transfers);
+            first_key = key;
+        }
+    }
+    let first = first.context("Table 2 needs at least one seed")?;
+
+    // Renders of the first seed.
+    let key = cache::key("renders", RENDERS_VERSION, "", &[&first_key]);
+    let t = Instant::now();
+    let names = [
+        "transfer_grid.png",
+        "onset_videos.gif",
+        "talking_videos.gif",
+    ];
+    let renders = match cache.get("renders", &key)? {
+        Some(e) => {
+            let r = names
+                .iter()
+                .map(|n| Ok((n.to_string(), e.read(n)?)))
+                .collect::<Result<Vec<_>>>()?;
+            record("renders", &key, true, t);
+            r
+        }
+        None => {
+            let r = renders(inp, &reference_frames, &first, &params)?;
+            cache.put("renders", &key, &r)?;
+            record("renders", &key, false, t);
+            r
+        }
+    };
+    Ok(Table2Result {
+        cohort_key,
+        rows,
+        reference: reference_frames,
+        first,
+        renders,
+    })
+}

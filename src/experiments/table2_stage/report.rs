@@ -1,0 +1,409 @@
+//! Table 2's CSVs, markdown and LaTeX tables, per-AU bars and the sweep summary.
+
+use crate::cohort::CohortKind;
+use crate::experiments::realfaces::FileRow;
+use crate::experiments::table2::{self, RefFrame, Row, Setting, Transferred};
+use crate::observe::{AU_COUNT, AU_NAMES};
+use crate::spec::Spec;
+use crate::stats;
+use anyhow::Result;
+
+pub(super) fn fmt(v: f64) -> String {
+    format!("{v:.6e}")
+}
+
+pub(super) fn row_name(kind: CohortKind, setting: Setting) -> String {
+    format!("{}-{}", kind.name().replace('_', "-"), setting.name())
+}
+
+/// Rows in table order: each cohort, unnormalized then normalized.
+pub(super) fn order() -> Vec<(CohortKind, Setting)> {
+    CohortKind::ALL
+        .iter()
+        .flat_map(|&k| Setting::ALL.iter().map(move |&s| (k, s)))
+        .collect()
+}
+
+/// One table row over seeds: per AU then the mean over 17, the mean over seeds and the 95%
+/// interval.
+pub(super) struct Summary {
+    pub(super) key: (CohortKind, Setting),
+    pub(super) mean: Vec<f64>,
+    pub(super) ci: Vec<f64>,
+}
+
+/// Mean and 95% interval over seeds of each of the 17 AUs' MSE and of their mean, from one
+/// table row's per-seed MSEs.
+pub(super) fn over_seeds(per_seed: &[&[f64; AU_COUNT]]) -> (Vec<f64>, Vec<f64>) {
+    let col = |j: usize| -> Vec<f64> {
+        per_seed
+            .iter()
+            .map(|m| {
+                if j < AU_COUNT {
+                    m[j]
+                } else {
+                    m.iter().sum::<f64>() / AU_COUNT as f64
+                }
+            })
+            .collect()
+    };
+    (
+        (0..=AU_COUNT).map(|j| stats::mean(&col(j))).collect(),
+        (0..=AU_COUNT).map(|j| stats::ci95(&col(j))).collect(),
+    )
+}
+
+/// Mean and 95% interval over seeds of each AU's MSE and of the mean, per table row.
+pub(super) fn summary(rows: &[Row]) -> Vec<Summary> {
+    order()
+        .into_iter()
+        .map(|(k, s)| {
+            let mine: Vec<&[f64; AU_COUNT]> = rows
+                .iter()
+                .filter(|r| r.cohort == k && r.setting == s)
+                .map(|r| &r.mse)
+                .collect();
+            let (mean, ci) = over_seeds(&mine);
+            Summary {
+                key: (k, s),
+                mean,
+                ci,
+            }
+        })
+        .collect()
+}
+
+/// The real file's rows (`table2.openface`), unnormalized then normalized: (row name, mean,
+/// interval) over seeds.
+pub(super) fn real_summary(real: &[FileRow]) -> Vec<(String, Vec<f64>, Vec<f64>)> {
+    Setting::ALL
+        .iter()
+        .filter_map(|&s| {
+            let mine: Vec<&FileRow> = real.iter().filter(|r| r.setting == s).collect();
+            let first = mine.first()?;
+            let mses: Vec<&[f64; AU_COUNT]> = mine.iter().map(|r| &r.mse).collect();
+            let (mean, ci) = over_seeds(&mses);
+            Some((format!("{}-{}", first.person, s.name()), mean, ci))
+        })
+        .collect()
+}
+
+/// `seed,cohort,setting,AU01..AU45,mean`, per seed, then `mean` and `ci95` rows.
+pub fn csv(rows: &[Row]) -> String {
+    let mut out = format!("seed,cohort,setting,{},mean\n", AU_NAMES.join(","));
+    let line = |label: &str, k: CohortKind, s: Setting, v: &[f64]| {
+        format!(
+            "{label},{},{},{}\n",
+            k.name(),
+            s.name(),
+            v.iter().map(|x| fmt(*x)).collect::<Vec<_>>().join(",")
+        )
+    };
+    for r in rows {
+        let v: Vec<f64> = r.mse.iter().copied().chain([r.mean()]).collect();
+        out.push_str(&line(&r.seed.to_string(), r.cohort, r.setting, &v));
+    }
+    for Summary {
+        key: (k, s),
+        mean,
+        ci,
+    } in summary(rows)
+    {
+        out.push_str(&line("mean", k, s, &mean));
+        out.push_str(&line("ci95", k, s, &ci));
+    }
+    out
+}
+
+pub(super) fn paper_aus() -> Vec<usize> {
+    table2::PAPER_AUS
+        .iter()
+        .map(|a| AU_NAMES.iter().position(|n| n == a).expect("known AU"))
+        .collect()
+}
+
+/// The paper row that plays the same role, if any.
+pub(super) fn paper_row(k: CohortKind, s: Setting) -> Option<usize> {
+    match (k, s) {
+        (CohortKind::Images, Setting::Unnormalized) => Some(0),
+        (CohortKind::Images, Setting::Normalized) => Some(1),
+        (CohortKind::TalkingVideos, Setting::Normalized) => Some(2),
+        (CohortKind::OnsetVideos, Setting::Normalized) => Some(3),
+        _ => None,
+    }
+}
+
+/// Table 2 in markdown: the cohorts' rows with the paper's under them, then the real file's
+/// rows (`real`, from `table2.openface`) when the spec names one.
+pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame], real: &[FileRow]) -> String {
+    let seeds = spec.seeds.len();
+    let count = |k: CohortKind| frames.iter().filter(|f| f.cohort == k).count();
+    let c = &spec.cohort;
+    let mut out = String::from("# Table 2: AU MSE of transferred expressions\n\n");
+    out.push_str(&format!(
+        "Per-AU MSE of (reference - transferred) / 5 over all images or frames of a cohort, \
+         for the paper's 8 AUs and the mean over all 17; facelab rows are the mean over {seeds} \
+         seed(s) (± 95% interval), each seed a unified network trained on the same dataset. \
+         Zeng et al.'s row for the same role is printed under ours. Normalized = each AU mapped \
+         ({}) across the cohort onto the training data's per-AU range.\n\n",
+        spec.table2_normalization.name()
+    ));
+    out.push_str(&format!(
+        "Cohorts (seed {}): images {} subjects x (neutral + 6 emotions) = {} images; \
+         onset videos {} subjects x 6 x {} frames = {}; talking videos {} subjects x 6 x {} \
+         frames = {}.\n\n",
+        c.seed,
+        c.images.subjects,
+        count(CohortKind::Images),
+        c.onset_videos.subjects,
+        c.onset_videos.frames,
+        count(CohortKind::OnsetVideos),
+        c.talking_videos.subjects,
+        c.talking_videos.frames,
+        count(CohortKind::TalkingVideos),
+    ));
+    let aus = paper_aus();
+    out.push_str(&format!(
+        "| setting | {} | mean (17) |\n|---|{}---|\n",
+        table2::PAPER_AUS.join(" | "),
+        "---|".repeat(aus.len())
+    ));
+    let line = |name: &str, mean: &[f64], ci: &[f64]| {
+        let cell = |j: usize| {
+            if seeds > 1 {
+                format!("{:.3} ± {:.3}", mean[j], ci[j])
+            } else {
+                format!("{:.3}", mean[j])
+            }
+        };
+        format!(
+            "| {name} | {} | {} |\n",
+            aus.iter().map(|&j| cell(j)).collect::<Vec<_>>().join(" | "),
+            cell(AU_COUNT)
+        )
+    };
+    for Summary {
+        key: (k, s),
+        mean,
+        ci,
+    } in summary(rows)
+    {
+        out.push_str(&line(&row_name(k, s), &mean, &ci));
+        if let Some(p) = paper_row(k, s) {
+            let (name, v, m) = &table2::PAPER[p];
+            out.push_str(&format!(
+                "| *Zeng et al.: {name}* | {} | *{m:.3}* |\n",
+                v.iter()
+                    .map(|x| format!("*{x:.3}*"))
+                    .collect::<Vec<_>>()
+                    .join(" | ")
+            ));
+        }
+    }
+    for (name, mean, ci) in real_summary(real) {
+        out.push_str(&line(&name, &mean, &ci));
+    }
+    if let (Some(file), Some(first)) = (&spec.table2_openface, real.first()) {
+        out.push_str(&format!(
+            "\nReal file: `{file}` ({} frames; {} rows with success = 0 skipped), a real \
+             person's OpenFace output transferred through each seed's unified network. Its \
+             rows compare OpenFace's AUs in the file with the observer's reading of the \
+             transferred face (calibration `{}`{}). Normalized = each AU mapped ({}) across the \
+             file's frames onto the training range. Per seed: \
+             `results/<experiment>/latest/table2_real.csv`.\n",
+            first.frames,
+            first.skipped,
+            spec.calibration,
+            if spec.reads_on_openface_scale() {
+                ", the readout fitted to OpenFace: both sides are on OpenFace's scale"
+            } else {
+                ": the observer's own scale, not OpenFace's"
+            },
+            spec.table2_normalization.name()
+        ));
+    }
+    out.push_str(
+        "\nAll 17 AUs per seed, with means and intervals: `results/<experiment>/latest/table2.csv`.\n",
+    );
+    out
+}
+
+pub fn tex(rows: &[Row], real: &[FileRow]) -> String {
+    let aus = paper_aus();
+    let mut out = String::from(
+        "% Table 2: AU MSE of transferred expressions (facelab; paper rows in italics)\n",
+    );
+    out.push_str(&format!(
+        "\\begin{{tabular}}{{l{}}}\n\\hline\nSetting & {} & Average \\\\\n\\hline\n",
+        "r".repeat(aus.len() + 1),
+        table2::PAPER_AUS
+            .iter()
+            .map(|a| format!("MSE$_{{\\mathrm{{{a}}}}}$"))
+            .collect::<Vec<_>>()
+            .join(" & ")
+    ));
+    for Summary {
+        key: (k, s), mean, ..
+    } in summary(rows)
+    {
+        out.push_str(&format!(
+            "{} & {} & {:.3} \\\\\n",
+            row_name(k, s),
+            aus.iter()
+                .map(|&j| format!("{:.3}", mean[j]))
+                .collect::<Vec<_>>()
+                .join(" & "),
+            mean[AU_COUNT]
+        ));
+        if let Some(p) = paper_row(k, s) {
+            let (name, v, m) = &table2::PAPER[p];
+            out.push_str(&format!(
+                "\\textit{{{name}}} & {} & \\textit{{{m:.3}}} \\\\\n",
+                v.iter()
+                    .map(|x| format!("\\textit{{{x:.3}}}"))
+                    .collect::<Vec<_>>()
+                    .join(" & ")
+            ));
+        }
+    }
+    for (name, mean, _) in real_summary(real) {
+        out.push_str(&format!(
+            "{name} & {} & {:.3} \\\\\n",
+            aus.iter()
+                .map(|&j| format!("{:.3}", mean[j]))
+                .collect::<Vec<_>>()
+                .join(" & "),
+            mean[AU_COUNT]
+        ));
+    }
+    out.push_str("\\hline\n\\end{tabular}\n");
+    out
+}
+
+/// Per-AU MSE bars for every setting (mean over seeds), all 17 AUs and the mean.
+pub fn bars(path: &std::path::Path, rows: &[Row]) -> Result<()> {
+    use crate::report::figures::{grouped_bars, PALETTE};
+    let categories: Vec<String> = AU_NAMES
+        .iter()
+        .map(|s| s.to_string())
+        .chain(["mean".to_string()])
+        .collect();
+    let groups: Vec<_> = summary(rows)
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| {
+            (
+                row_name(r.key.0, r.key.1),
+                PALETTE[i % PALETTE.len()],
+                r.mean,
+            )
+        })
+        .collect();
+    grouped_bars(
+        path,
+        "Table 2: per-AU MSE of transferred AUs",
+        "MSE",
+        &categories,
+        &groups,
+    )
+}
+
+/// The transfer's per-frame data for the first seed: reference and transferred AUs per setting.
+pub fn frames_csv(reference: &[RefFrame], first: &[(Setting, Vec<Transferred>)]) -> String {
+    let mut out = String::from("cohort,subject,expression,frame");
+    for a in AU_NAMES {
+        out.push_str(&format!(",ref_{a}"));
+    }
+    for (s, _) in first {
+        for a in AU_NAMES {
+            out.push_str(&format!(",{}_{a}", s.name()));
+        }
+    }
+    out.push('\n');
+    for (i, f) in reference.iter().enumerate() {
+        out.push_str(&format!(
+            "{},{},{},{}",
+            f.cohort.name(),
+            f.subject,
+            f.expression.map_or("neutral", |e| e.name()),
+            f.frame
+        ));
+        for v in &f.aus {
+            out.push_str(&format!(",{v:.4}"));
+        }
+        for (_, t) in first {
+            for v in &t[i].aus {
+                out.push_str(&format!(",{v:.4}"));
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// The mean AU MSE over the 17 AUs and the seeds of one cohort and setting.
+pub(super) fn mean_over_aus(s: &[Summary], kind: CohortKind, setting: Setting) -> f64 {
+    s.iter()
+        .find(|r| r.key == (kind, setting))
+        .map_or(f64::NAN, |r| r.mean[AU_COUNT])
+}
+
+/// `sweep_table2.png`: each cell's mean AU MSE per cohort and setting, the figure of a sweep
+/// over Table 2's keys (whose Table 1 stays the same in every cell).
+pub fn sweep_figure(
+    dir: &std::path::Path,
+    cells: &[(String, Vec<Row>)],
+    labels: &[String],
+) -> Result<()> {
+    use crate::report::figures::{grouped_bars, PALETTE};
+    let summaries: Vec<Vec<Summary>> = cells.iter().map(|(_, rows)| summary(rows)).collect();
+    let mut groups = Vec::new();
+    for (i, k) in CohortKind::ALL.into_iter().enumerate() {
+        for (j, setting) in Setting::ALL.into_iter().enumerate() {
+            groups.push((
+                format!("{}, {}", k.name().replace('_', " "), setting.name()),
+                PALETTE[(2 * i + j) % PALETTE.len()],
+                summaries
+                    .iter()
+                    .map(|s| mean_over_aus(s, k, setting))
+                    .collect(),
+            ));
+        }
+    }
+    grouped_bars(
+        &dir.join("sweep_table2.png"),
+        "Table 2: mean AU MSE over 17 AUs",
+        "AU MSE (mean over seeds)",
+        labels,
+        &groups,
+    )
+}
+
+/// Table 2 over a sweep: per cell, each cohort's mean AU MSE (over 17 AUs, mean over seeds)
+/// unnormalized and normalized.
+pub fn sweep_markdown(cells: &[(String, Vec<Row>)]) -> String {
+    let mut out = String::from(
+        "\n## Table 2: mean AU MSE over 17 AUs (unnormalized / normalized)\n\n| cell |",
+    );
+    for k in CohortKind::ALL {
+        out.push_str(&format!(" {} |", k.name().replace('_', " ")));
+    }
+    out.push_str(&format!(
+        "\n|---|{}\n",
+        "---|".repeat(CohortKind::ALL.len())
+    ));
+    for (name, rows) in cells {
+        let s = summary(rows);
+        let mean = |k, setting| mean_over_aus(&s, k, setting);
+        out.push_str(&format!("| {name} |"));
+        for k in CohortKind::ALL {
+            out.push_str(&format!(
+                " {:.4} / {:.4} |",
+                mean(k, Setting::Unnormalized),
+                mean(k, Setting::Normalized)
+            ));
+        }
+        out.push('\n');
+    }
+    out
+}

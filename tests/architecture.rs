@@ -1,0 +1,266 @@
+//! The module boundaries of `docs/architecture.md` (DESIGN section 4 as amended there),
+//! checked on the source: every `crate::<module>` path and every external crate named in the
+//! library's non-test code must be one its module may use. A test module (`#[cfg(test)]`,
+//! inline or in a `tests.rs`) may use anything, so it is cut before the check.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// What each top-level module of `src/` may import from the crate (besides itself).
+/// `rng`, `stats`, `cache` and `invert` are leaves; `sim` may use the numeric leaves only.
+const ALLOWED: &[(&str, &[&str])] = &[
+    ("rng", &[]),
+    ("stats", &[]),
+    ("cache", &[]),
+    ("invert", &[]),
+    ("sim", &["rng", "invert"]),
+    ("observe", &["sim", "rng", "stats"]),
+    ("learn", &["rng", "stats"]),
+    ("cohort", &["sim", "observe", "rng", "stats"]),
+    ("landmark", &["sim", "observe", "rng", "stats"]),
+    ("edit", &["sim", "observe", "rng", "stats", "invert"]),
+    (
+        "io",
+        &[
+            "sim", "observe", "learn", "landmark", "cohort", "rng", "stats",
+        ],
+    ),
+    (
+        "dataset",
+        &["sim", "observe", "io", "landmark", "report", "rng", "stats"],
+    ),
+    (
+        "headneck",
+        &["sim", "observe", "learn", "invert", "rng", "stats"],
+    ),
+    (
+        "spec",
+        &[
+            "sim", "observe", "learn", "cohort", "landmark", "io", "dataset", "headneck", "invert",
+            "rng", "stats",
+        ],
+    ),
+    (
+        "report",
+        &[
+            "sim", "observe", "learn", "cohort", "landmark", "io", "invert", "rng", "stats", "edit",
+        ],
+    ),
+    (
+        "experiments",
+        &[
+            "sim", "observe", "learn", "cohort", "landmark", "io", "dataset", "headneck", "invert",
+            "rng", "stats", "edit", "spec", "cache", "report",
+        ],
+    ),
+];
+
+/// Which modules may name each external crate directly.
+const EXTERNAL: &[(&str, &[&str])] = &[
+    ("toml", &["spec"]),
+    ("polars", &["io", "report"]),
+    ("plotters", &["report"]),
+    ("candle_core", &["learn", "landmark"]),
+    ("candle_nn", &["learn", "landmark"]),
+    ("image", &["io", "report", "experiments"]),
+    ("indicatif", &["experiments"]),
+];
+
+/// The first path segment after `crate::` of every path in `code`, including the members of
+/// a grouped `use crate::{a::x, b::y}`.
+fn crate_paths(code: &str) -> BTreeSet<String> {
+    let mut found = BTreeSet::new();
+    let mut rest = code;
+    while let Some(at) = rest.find("crate::") {
+        let before = rest[..at].chars().next_back();
+        rest = &rest[at + "crate::".len()..];
+        // `$crate::` and `facelab_crate::` are not this crate's paths.
+        if before.is_some_and(|c| c == '$' || c == '_' || c.is_alphanumeric()) {
+            continue;
+        }
+        if let Some(group) = rest.strip_prefix('{') {
+            let mut depth = 1;
+            let end = group
+                .char_indices()
+                .find(|&(_, c)| {
+                    depth += match c {
+                        '{' => 1,
+                        '}' => -1,
+                        _ => 0,
+                    };
+                    depth == 0
+                })
+                .map_or(group.len(), |(i, _)| i);
+            let mut depth = 0;
+            let mut item = String::new();
+            for c in group[..end].chars().chain([',']) {
+                match c {
+                    '{' => depth += 1,
+                    '}' => depth -= 1,
+                    ',' if depth == 0 => {
+                        found.insert(head(item.trim()));
+                        item.clear();
+                        continue;
+                    }
+                    _ => {}
+                }
+                item.push(c);
+            }
+        } else {
+            found.insert(head(rest));
+        }
+    }
+    found.remove("");
+    found
+}
+
+fn head(path: &str) -> String {
+    path.chars()
+        .take_while(|c| c.is_alphanumeric() || *c == '_')
+        .collect()
+}
+
+/// `text` without comments and without the `#[cfg(test)]` item that closes a file.
+fn library_code(text: &str) -> String {
+    let text = match text.find("#[cfg(test)]\nmod ") {
+        Some(at) => &text[..at],
+        None => text,
+    };
+    text.lines()
+        .map(|line| match line.find("//") {
+            Some(at) if !line[..at].contains('"') => &line[..at],
+            _ => line,
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+/// Every forbidden import in the source folder `src`, as "file: module -> what".
+fn violations(src: &Path) -> Vec<String> {
+    let allowed: BTreeMap<&str, &[&str]> = ALLOWED.iter().copied().collect();
+    let mut files = Vec::new();
+    rust_files(src, &mut files);
+    files.sort();
+    let mut found = Vec::new();
+    for file in files {
+        let rel = file.strip_prefix(src).unwrap();
+        let module = rel
+            .components()
+            .next()
+            .unwrap()
+            .as_os_str()
+            .to_string_lossy()
+            .trim_end_matches(".rs")
+            .to_string();
+        // The binary's own files (`main.rs`, its clap structs in `cli.rs`) may use anything.
+        if module == "main" || module == "lib" || module == "cli" {
+            continue;
+        }
+        let Some(may) = allowed.get(module.as_str()) else {
+            found.push(format!(
+                "{}: module `{module}` has no rule in tests/architecture.rs",
+                rel.display()
+            ));
+            continue;
+        };
+        // A module's tests in their own file (`#[cfg(test)] mod tests;`) are test code.
+        if file.file_name().is_some_and(|n| n == "tests.rs") {
+            continue;
+        }
+        let code = library_code(&std::fs::read_to_string(&file).unwrap());
+        for target in crate_paths(&code) {
+            if target != module && !may.contains(&target.as_str()) {
+                found.push(format!("{}: {module} -> {target}", rel.display()));
+            }
+        }
+        for (krate, users) in EXTERNAL {
+            let named = code.contains(&format!("{krate}::"));
+            if named && !users.contains(&module.as_str()) {
+                found.push(format!("{}: {module} -> extern {krate}", rel.display()));
+            }
+        }
+    }
+    found
+}
+
+/// Whether the allowed imports form no cycle (a module graph that is a partial order).
+fn cycle() -> Option<Vec<&'static str>> {
+    let allowed: BTreeMap<&str, &[&str]> = ALLOWED.iter().copied().collect();
+    fn visit(
+        m: &'static str,
+        allowed: &BTreeMap<&str, &'static [&'static str]>,
+        path: &mut Vec<&'static str>,
+        done: &mut BTreeSet<&'static str>,
+    ) -> Option<Vec<&'static str>> {
+        if let Some(at) = path.iter().position(|p| *p == m) {
+            return Some(path[at..].to_vec());
+        }
+        if done.contains(m) {
+            return None;
+        }
+        path.push(m);
+        for next in allowed.get(m).copied().unwrap_or(&[]) {
+            if let Some(c) = visit(next, allowed, path, done) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        done.insert(m);
+        None
+    }
+    let mut done = BTreeSet::new();
+    ALLOWED
+        .iter()
+        .find_map(|(m, _)| visit(m, &allowed, &mut Vec::new(), &mut done))
+}
+
+#[test]
+fn the_source_keeps_the_module_boundaries() {
+    let found = violations(&crate::root().join("src"));
+    assert!(
+        found.is_empty(),
+        "imports that docs/architecture.md forbids:\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn the_allowed_imports_have_no_cycle() {
+    assert_eq!(cycle(), None);
+}
+
+/// The check itself can fail: a copy of `sim` that imports `observe` is caught, and a grouped
+/// import is read member by member.
+#[test]
+fn a_forbidden_import_is_caught() {
+    let dir = crate::temp("architecture", "forbidden");
+    std::fs::create_dir_all(dir.join("sim")).unwrap();
+    std::fs::write(
+        dir.join("sim/solver.rs"),
+        "//! uses crate::report in a comment only\nuse crate::{sim::geom::V3, observe::Observer};\n\
+         fn f() { let _ = crate::rng::stream(1, \"x\"); }\n\
+         #[cfg(test)]\nmod tests { use crate::io::mesh; }\n",
+    )
+    .unwrap();
+    std::fs::write(dir.join("stats.rs"), "fn g() { toml::from_str(\"\"); }\n").unwrap();
+    let found = violations(&dir);
+    assert_eq!(
+        found,
+        [
+            "sim/solver.rs: sim -> observe".to_string(),
+            "stats.rs: stats -> extern toml".to_string(),
+        ]
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
