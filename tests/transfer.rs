@@ -16,7 +16,7 @@ use facelab::sim::{SolveParams, Workspace};
 
 use crate::{facelab, openface_file, root, Frame};
 
-fn temp(name: &str) -> PathBuf {
+fn temp(name: &str) -> crate::Scratch {
     crate::temp("transfer", name)
 }
 

@@ -12,17 +12,17 @@ use sha2::{Digest, Sha256};
 
 #[derive(Debug, thiserror::Error)]
 pub enum CacheError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CacheError + '_ {
-    move |source| CacheError::Io {
+    move |cause| CacheError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     }
 }
 
@@ -42,6 +42,23 @@ pub fn key(stage: &str, version: u32, values: &str, inputs: &[&str]) -> String {
         text.push('\n');
     }
     sha256(text.as_bytes())
+}
+
+/// What a cache lookup found.
+#[derive(Clone, Debug)]
+pub enum Lookup {
+    Hit(Entry),
+    Missing,
+    Damaged { dir: PathBuf, reason: String },
+}
+
+impl Lookup {
+    pub fn entry(self) -> Option<Entry> {
+        match self {
+            Lookup::Hit(e) => Some(e),
+            _ => None,
+        }
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -79,38 +96,61 @@ impl Cache {
         self.root.join(stage).join(key)
     }
 
-    /// The entry if it is present and every file matches its checksum. A damaged entry is
-    /// removed (so the caller recomputes it) and reported as `Ok(None)`.
-    pub fn get(&self, stage: &str, key: &str) -> Result<Option<Entry>, CacheError> {
+    /// What the cache holds under `key`, read-only: a complete entry whose every file matches
+    /// its checksum, nothing, or a damaged entry (and what is wrong with it).
+    pub fn inspect(&self, stage: &str, key: &str) -> Lookup {
         let dir = self.dir(stage, key);
         let listing = dir.join("entry.json");
-        let Ok(text) = std::fs::read(&listing) else {
-            if dir.exists() {
-                let _ = std::fs::remove_dir_all(&dir);
-            }
-            return Ok(None);
-        };
-        let files: Option<BTreeMap<String, String>> = serde_json::from_slice(&text).ok();
-        let verified = files.filter(|files| {
-            files.iter().all(|(name, sum)| {
-                std::fs::read(dir.join(name))
-                    .map(|b| &sha256(&b) == sum)
-                    .unwrap_or(false)
-            })
-        });
-        match verified {
-            Some(files) => Ok(Some(Entry { dir, files })),
-            None => {
-                // Move it aside first so a concurrent reader never sees half a removal.
-                let trash = self
-                    .root
-                    .join(format!(".trash-{}-{key}", std::process::id()));
-                if std::fs::rename(&dir, &trash).is_ok() {
-                    let _ = std::fs::remove_dir_all(&trash);
+        let text = match std::fs::read(&listing) {
+            Ok(text) => text,
+            Err(_) if !dir.exists() => return Lookup::Missing,
+            Err(_) => {
+                return Lookup::Damaged {
+                    dir,
+                    reason: "entry.json is missing".into(),
                 }
-                Ok(None)
+            }
+        };
+        let Ok(files) = serde_json::from_slice::<BTreeMap<String, String>>(&text) else {
+            return Lookup::Damaged {
+                dir,
+                reason: "entry.json is not a file list".into(),
+            };
+        };
+        for (name, sum) in &files {
+            match std::fs::read(dir.join(name)) {
+                Ok(bytes) if &sha256(&bytes) == sum => {}
+                Ok(_) => {
+                    return Lookup::Damaged {
+                        dir,
+                        reason: format!("{name} does not match its checksum"),
+                    }
+                }
+                Err(e) => {
+                    return Lookup::Damaged {
+                        dir,
+                        reason: format!("{name} cannot be read ({e})"),
+                    }
+                }
             }
         }
+        Lookup::Hit(Entry { dir, files })
+    }
+
+    /// The entry if it is present and every file matches its checksum. A damaged entry is
+    /// removed (so the caller recomputes it) and returned as `Damaged`, for the caller to say.
+    pub fn get(&self, stage: &str, key: &str) -> Result<Lookup, CacheError> {
+        let found = self.inspect(stage, key);
+        if let Lookup::Damaged { dir, .. } = &found {
+            // Move it aside first so a concurrent reader never sees half a removal.
+            let trash = self
+                .root
+                .join(format!(".trash-{}-{key}", std::process::id()));
+            if std::fs::rename(dir, &trash).is_ok() {
+                let _ = std::fs::remove_dir_all(&trash);
+            }
+        }
+        Ok(found)
     }
 
     /// Stores `files` (name, bytes) as the entry for `key`, atomically.
@@ -176,11 +216,6 @@ impl Cache {
             }
         }
     }
-
-    /// Whether a verified entry exists (for `facelab status`).
-    pub fn has(&self, stage: &str, key: &str) -> bool {
-        matches!(self.get(stage, key), Ok(Some(_)))
-    }
 }
 
 #[cfg(test)]
@@ -193,14 +228,22 @@ mod tests {
         let _ = std::fs::remove_dir_all(&root);
         let cache = Cache::new(&root);
         let k = key("s", 1, "a=1", &[]);
-        assert!(cache.get("s", &k).unwrap().is_none());
+        assert!(cache.get("s", &k).unwrap().entry().is_none());
         let e = cache
             .put("s", &k, &[("x.csv".into(), b"1,2,3\n".to_vec())])
             .unwrap();
         assert_eq!(e.read("x.csv").unwrap(), b"1,2,3\n");
-        assert!(cache.get("s", &k).unwrap().is_some());
+        assert!(cache.get("s", &k).unwrap().entry().is_some());
         std::fs::write(e.path("x.csv"), b"1,2").unwrap();
-        assert!(cache.get("s", &k).unwrap().is_none());
+        // Inspecting says what is wrong and leaves the entry; getting removes it.
+        assert!(
+            matches!(cache.inspect("s", &k), Lookup::Damaged { reason, .. } if reason.contains("x.csv"))
+        );
+        assert!(e.dir.exists());
+        assert!(matches!(
+            cache.get("s", &k).unwrap(),
+            Lookup::Damaged { .. }
+        ));
         assert!(!e.dir.exists());
         assert_ne!(key("s", 1, "a=1", &[]), key("s", 2, "a=1", &[]));
         let _ = std::fs::remove_dir_all(&root);

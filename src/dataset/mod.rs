@@ -160,16 +160,13 @@ pub fn generate(
     au_controls: &[Vec<usize>],
     params: &DatasetParams,
     seed: u64,
+    jobs: &[(Expression, usize)],
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<Sample>> {
     let solve = SolveParams {
         tolerance: params.tolerance,
         ..SolveParams::default()
     };
-    let jobs: Vec<(Expression, usize)> = Expression::ALL
-        .iter()
-        .flat_map(|&e| (0..params.pairs_per_expression).map(move |i| (e, i)))
-        .collect();
     jobs.par_iter()
         .map_init(
             || Workspace::new(model),
@@ -197,6 +194,16 @@ pub fn generate(
                 })
             },
         )
+        .collect()
+}
+
+/// Every sample of a data set, in its order: each expression's `pairs_per_expression`
+/// indices. A sample depends only on its own `(expression, index)` stream, so any run of
+/// consecutive jobs can be generated on its own (the harness caches them in chunks).
+pub fn jobs(params: &DatasetParams) -> Vec<(Expression, usize)> {
+    Expression::ALL
+        .iter()
+        .flat_map(|&e| (0..params.pairs_per_expression).map(move |i| (e, i)))
         .collect()
 }
 

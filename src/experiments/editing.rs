@@ -60,8 +60,7 @@ pub fn edit_file(
         ..curves.clone()
     };
     let mut written = Vec::new();
-    write_atomic(out, result.to_csv().as_bytes())
-        .with_context(|| format!("{}: cannot write", out.display()))?;
+    write_atomic(out, result.to_csv().as_bytes())?;
     written.push(out.to_path_buf());
     if let Some((path, spacings)) = figure {
         let Some(first) = keys.first() else {
@@ -181,7 +180,7 @@ pub fn retarget(input: &Path, subjects: usize, frames: &[f64], out: &Path) -> Re
     let mut written = Vec::new();
     let mut write = |name: &str, bytes: Vec<u8>| -> Result<()> {
         let path = out.join(name);
-        write_atomic(&path, &bytes).with_context(|| format!("{}: cannot write", path.display()))?;
+        write_atomic(&path, &bytes)?;
         written.push(path);
         Ok(())
     };

@@ -4,17 +4,18 @@
 //! (paper Fig. 7), and the face riding on the simulated skull (paper Fig. 4).
 
 use std::path::Path;
-use std::time::Instant;
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 
-use crate::cache::Cache;
+use crate::cache::Entry;
+use crate::experiments::run::Trained;
+use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::headneck::{
     dataset, face_motion, posed_face, sequences, static_targets, Learned, INPUTS, OUTPUTS,
     STRAIN_SCALE,
 };
-use crate::learn::mlp::{train, Curves, Mlp, Pairs};
+use crate::learn::mlp::{train, Curves, Pairs};
 use crate::report::compose::{labelled_grid, png_bytes};
 use crate::report::figures::{line_panels, Panel, XySeries, PALETTE};
 use crate::report::render::{render, Camera, RenderOptions};
@@ -49,6 +50,40 @@ const TRAIN_KEYS: [&str; 6] = [
 /// Strains are scaled by this in the network's outputs so that they weigh like activations.
 /// Samples per second in the trajectories.
 const SAMPLE_RATE: f64 = 100.0;
+
+/// The teacher's training pairs and how many of its fits missed their target.
+struct Teaching {
+    train: Pairs,
+    test: Pairs,
+    missed: usize,
+}
+
+impl Artifact for Teaching {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![
+            ("train_x.f32".into(), f32_bytes(&self.train.x)),
+            ("train_y.f32".into(), f32_bytes(&self.train.y)),
+            ("test_x.f32".into(), f32_bytes(&self.test.x)),
+            ("test_y.f32".into(), f32_bytes(&self.test.y)),
+            ("missed.txt".into(), self.missed.to_string().into_bytes()),
+        ])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        let read = |name: &str| -> Result<Pairs> {
+            Ok(Pairs {
+                inputs: INPUTS,
+                outputs: OUTPUTS,
+                x: f32_from(&entry.read(&format!("{name}_x.f32"))?),
+                y: f32_from(&entry.read(&format!("{name}_y.f32"))?),
+            })
+        };
+        Ok(Teaching {
+            train: read("train")?,
+            test: read("test")?,
+            missed: text(entry, "missed.txt")?.trim().parse()?,
+        })
+    }
+}
 
 fn f32_bytes(v: &[f32]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
@@ -137,98 +172,51 @@ pub struct Output {
     runs: Vec<(&'static str, String, Trajectory)>,
 }
 
+/// The teacher's training pairs: only the keys the data reads, so retraining never re-fits.
+pub fn data_unit(spec: &crate::spec::Spec) -> Unit {
+    let values = super::run::values_text(spec, &DATA_KEYS);
+    Unit::new("headpose_data", HEADPOSE_VERSION, &values, &[])
+}
+
+/// The voluntary network, trained on the data of `data_key`.
+pub fn train_unit(spec: &crate::spec::Spec, data_key: &str) -> Unit {
+    let values = super::run::values_text(spec, &TRAIN_KEYS);
+    Unit::new("headpose_train", HEADPOSE_VERSION, &values, &[data_key])
+}
+
 /// Dataset and training (cached), then the evaluation.
-pub fn stage(
-    spec: &crate::spec::Spec,
-    cache: &Cache,
-    record: &mut dyn FnMut(&str, &str, bool, Instant),
-    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
-) -> Result<Output> {
+pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
     let p = &spec.headpose;
     let neck = p.neck();
-    // Each stage hashes only the keys it reads: retraining never re-fits.
-    let data_values = super::run::values_text(spec, &DATA_KEYS);
-    let data_key = crate::cache::key("headpose_data", HEADPOSE_VERSION, &data_values, &[]);
-    let t = Instant::now();
-    let (train_pairs, test_pairs, missed) = match cache.get("headpose_data", &data_key)? {
-        Some(e) => {
-            let read = |name: &str, inputs: usize, outputs: usize| -> Result<Pairs> {
-                Ok(Pairs {
-                    inputs,
-                    outputs,
-                    x: f32_from(&e.read(&format!("{name}_x.f32"))?),
-                    y: f32_from(&e.read(&format!("{name}_y.f32"))?),
-                })
-            };
-            let missed = String::from_utf8(e.read("missed.txt")?)?.trim().parse()?;
-            record("headpose_data", &data_key, true, t);
-            (
-                read("train", INPUTS, OUTPUTS)?,
-                read("test", INPUTS, OUTPUTS)?,
-                missed,
-            )
-        }
-        None => {
-            let progress = bar(p.fit_targets as u64, "neck equilibrium fits");
-            let tick = || progress.inc(1);
-            let (train, test, missed) = dataset(&neck, p, &tick)?;
-            progress.finish_and_clear();
-            cache.put(
-                "headpose_data",
-                &data_key,
-                &[
-                    ("train_x.f32".into(), f32_bytes(&train.x)),
-                    ("train_y.f32".into(), f32_bytes(&train.y)),
-                    ("test_x.f32".into(), f32_bytes(&test.x)),
-                    ("test_y.f32".into(), f32_bytes(&test.y)),
-                    ("missed.txt".into(), missed.to_string().into_bytes()),
-                ],
-            )?;
-            record("headpose_data", &data_key, false, t);
-            (train, test, missed)
-        }
-    };
-    let train_values = super::run::values_text(spec, &TRAIN_KEYS);
-    let train_key = crate::cache::key(
-        "headpose_train",
-        HEADPOSE_VERSION,
-        &train_values,
-        &[&data_key],
-    );
-    let t = Instant::now();
-    let (mlp, curves) = match cache.get("headpose_train", &train_key)? {
-        Some(e) => {
-            record("headpose_train", &train_key, true, t);
-            (
-                Mlp::from_safetensors(&e.read("weights.safetensors")?)?,
-                super::run::curves_from(&String::from_utf8(e.read("curves.csv")?)?),
-            )
-        }
-        None => {
-            let mut rng = stream(p.seed, "headpose/network");
-            let mut uniform = || rng.uniform();
-            let (mlp, curves) = train(&train_pairs, &test_pairs, &p.model, &p.train, &mut uniform)
-                .context("training the voluntary controller")?;
-            cache.put(
-                "headpose_train",
-                &train_key,
-                &[
-                    ("weights.safetensors".into(), mlp.to_safetensors()?),
-                    (
-                        "curves.csv".into(),
-                        super::run::curves_csv(&curves).into_bytes(),
-                    ),
-                ],
-            )?;
-            record("headpose_train", &train_key, false, t);
-            (mlp, curves)
-        }
-    };
+    let data = data_unit(spec);
+    let Teaching {
+        train: train_pairs,
+        test: test_pairs,
+        missed,
+    } = stages.get_or_compute(&data, |stages| {
+        let progress = stages.bar(p.fit_targets as u64, "neck equilibrium fits");
+        let tick = || progress.inc(1);
+        let (train, test, missed) = dataset(&neck, p, &tick)?;
+        progress.finish_and_clear();
+        Ok(Teaching {
+            train,
+            test,
+            missed,
+        })
+    })?;
+    let training = train_unit(spec, &data.key);
+    let Trained { mlp, curves } = stages.get_or_compute(&training, |_| {
+        let mut rng = stream(p.seed, "headpose/network");
+        let mut uniform = || rng.uniform();
+        let (mlp, curves) = train(&train_pairs, &test_pairs, &p.model, &p.train, &mut uniform)
+            .context("training the voluntary controller")?;
+        Ok(Trained { mlp, curves })
+    })?;
 
     // Static targets, both controllers; sequences with the learned one.
     let targets = static_targets(p.range_degrees);
     let every = (neck.params.simulation_rate / SAMPLE_RATE).round() as usize;
-    let progress = bar(2 * targets.len() as u64, "head pose tracking");
+    let progress = stages.bar(2 * targets.len() as u64, "head pose tracking");
     let jobs: Vec<(&'static str, usize)> = ["teacher", "learned"]
         .into_iter()
         .flat_map(|c| (0..targets.len()).map(move |i| (c, i)))
@@ -634,7 +622,6 @@ pub fn figures(
         &[String::new()],
         &labels,
     )?;
-    crate::io::atomic::write_atomic(&dir.join("face_poses.png"), &png_bytes(&grid)?)
-        .with_context(|| format!("{}: cannot write", dir.join("face_poses.png").display()))?;
+    crate::io::atomic::write_atomic(&dir.join("face_poses.png"), &png_bytes(&grid)?)?;
     Ok(())
 }

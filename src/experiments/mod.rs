@@ -11,6 +11,7 @@ pub mod pose_transfer;
 pub mod reach;
 pub mod realfaces;
 pub mod run;
+pub mod stage;
 pub mod table1;
 pub mod table2;
 pub mod table2_stage;

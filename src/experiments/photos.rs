@@ -508,8 +508,7 @@ pub fn write_files(out: &Path, files: &[(&'static str, Vec<u8>)]) -> Result<Vec<
     let mut written = Vec::new();
     for (file, data) in files {
         let path = out.join(file);
-        crate::io::atomic::write_atomic(&path, data)
-            .with_context(|| format!("{}: cannot write", path.display()))?;
+        crate::io::atomic::write_atomic(&path, data)?;
         written.push(path);
     }
     Ok(written)

@@ -9,15 +9,14 @@
 //!
 //! The error of a frame is the angle of the rotation between the target and achieved poses.
 
-use std::time::Instant;
-
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use super::table2::RefFrame;
 use super::transfer::follow;
-use crate::cache::Cache;
+use crate::cache::Entry;
 use crate::cohort::{CohortKind, CohortParams};
+use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::learn::Mlp;
 use crate::sim::neck::{HeadPose, Neck, PoseSequence};
 
@@ -184,60 +183,61 @@ pub fn markdown(rows: &[PoseRow]) -> String {
     out
 }
 
+/// Each frame's pose error (degrees), as `errors.csv`.
+struct Errors(Vec<f64>);
+
+impl Artifact for Errors {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        let mut text = String::from("error_deg\n");
+        for e in &self.0 {
+            text.push_str(&format!("{e}\n"));
+        }
+        Ok(vec![("errors.csv".into(), text.into_bytes())])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        let errors = text(entry, "errors.csv")?
+            .lines()
+            .skip(1)
+            .map(|l| {
+                l.parse::<f64>()
+                    .with_context(|| format!("{}: `{l}`", entry.path("errors.csv").display()))
+            })
+            .collect::<Result<Vec<f64>>>()?;
+        Ok(Errors(errors))
+    }
+}
+
+/// The stage's unit: `headpose.*`, the cohorts' key and the controller's bytes.
+pub fn unit(spec: &crate::spec::Spec, cohort_key: &str, voluntary: &[u8]) -> Unit {
+    let values = super::run::values_text(spec, &["headpose."]);
+    let controller = crate::cache::sha256(voluntary);
+    Unit::new(
+        "pose_transfer",
+        POSE_TRANSFER_VERSION,
+        &values,
+        &[cohort_key, &controller],
+    )
+}
+
 /// The cached stage: its key is the cohort's key, the controller's bytes and the neck's
 /// parameters (`headpose.*`).
 #[allow(clippy::too_many_arguments)]
 pub fn stage(
     spec: &crate::spec::Spec,
-    cache: &Cache,
-    record: &mut dyn FnMut(&str, &str, bool, Instant),
-    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
+    stages: &mut Stages,
     cohort_key: &str,
     voluntary: &[u8],
     reference: &[RefFrame],
 ) -> Result<Vec<PoseRow>> {
-    let values = super::run::values_text(spec, &["headpose."]);
-    let controller = crate::cache::sha256(voluntary);
-    let key = crate::cache::key(
-        "pose_transfer",
-        POSE_TRANSFER_VERSION,
-        &values,
-        &[cohort_key, &controller],
-    );
-    let t = Instant::now();
-    let errors = match cache.get("pose_transfer", &key)? {
-        Some(e) => {
-            let text = String::from_utf8(e.read("errors.csv")?)?;
-            let errors = text
-                .lines()
-                .skip(1)
-                .map(|l| {
-                    l.parse::<f64>()
-                        .with_context(|| format!("{}: `{l}`", e.path("errors.csv").display()))
-                })
-                .collect::<Result<Vec<f64>>>()?;
-            record("pose_transfer", &key, true, t);
-            errors
-        }
-        None => {
-            let mlp = Mlp::from_safetensors(voluntary)?;
-            let neck = spec.headpose.neck();
-            let progress = bar(jobs(reference).len() as u64, "pose");
-            let tick = || progress.inc(1);
-            let errors = errors(&neck, &mlp, &spec.cohort, reference, &tick)?;
-            progress.finish_and_clear();
-            let mut text = String::from("error_deg\n");
-            for e in &errors {
-                text.push_str(&format!("{e}\n"));
-            }
-            cache.put(
-                "pose_transfer",
-                &key,
-                &[("errors.csv".into(), text.into_bytes())],
-            )?;
-            record("pose_transfer", &key, false, t);
-            errors
-        }
-    };
+    let unit = unit(spec, cohort_key, voluntary);
+    let Errors(errors) = stages.get_or_compute(&unit, |stages| {
+        let mlp = Mlp::from_safetensors(voluntary)?;
+        let neck = spec.headpose.neck();
+        let progress = stages.bar(jobs(reference).len() as u64, "pose");
+        let tick = || progress.inc(1);
+        let errors = errors(&neck, &mlp, &spec.cohort, reference, &tick)?;
+        progress.finish_and_clear();
+        Ok(Errors(errors))
+    })?;
     Ok(summarize(reference, &errors))
 }

@@ -207,8 +207,7 @@ pub fn write_reach(
         .collect();
     let mut written = Vec::new();
     let reach_path = out.join("au_reach.csv");
-    write_atomic(&reach_path, csv_text(&lines)?.as_bytes())
-        .with_context(|| format!("{}: cannot write", reach_path.display()))?;
+    write_atomic(&reach_path, csv_text(&lines)?.as_bytes())?;
     written.push(reach_path);
 
     let matrix = muscle_au_matrix(&model, &observer)?;
@@ -227,8 +226,7 @@ pub fn write_reach(
         csv.push('\n');
     }
     let matrix_path = out.join("muscle_au_matrix.csv");
-    write_atomic(&matrix_path, csv.as_bytes())
-        .with_context(|| format!("{}: cannot write", matrix_path.display()))?;
+    write_atomic(&matrix_path, csv.as_bytes())?;
     written.push(matrix_path);
     let figure = out.join("muscle_au_matrix.png");
     heat_map(
@@ -345,7 +343,6 @@ pub fn write_sweep(source: &FaceSource, out: &Path) -> Result<Vec<SweepLine>> {
     let model = source.model()?;
     let lines = sweep(&model, source)?;
     let path = out.join("validity.csv");
-    write_atomic(&path, csv_text(&lines)?.as_bytes())
-        .with_context(|| format!("{}: cannot write", path.display()))?;
+    write_atomic(&path, csv_text(&lines)?.as_bytes())?;
     Ok(lines)
 }

@@ -11,13 +11,12 @@
 //! listed file, `realfaces.frame_stride`, `table2.normalization`, and the keys of the seed's
 //! unified network, the dataset (its AU range) and the basis.
 
-use std::time::Instant;
-
 use anyhow::{bail, Context, Result};
 
 use super::table2::{range_map, training_range, transfer, Setting};
-use crate::cache::{self, Cache};
+use crate::cache::{self, Entry};
 use crate::dataset::reader::FaceReader;
+use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::io::openface::read_openface;
 use crate::io::realdata::RealInput;
 use crate::learn::Mlp;
@@ -75,7 +74,17 @@ pub struct Inputs<'a> {
     pub observer: &'a Observer,
 }
 
-type Record<'r> = &'r mut dyn FnMut(&str, &str, bool, Instant);
+/// One seed's rows as `realfaces.csv`.
+struct RealRows(String);
+
+impl Artifact for RealRows {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![("realfaces.csv".into(), self.0.clone().into_bytes())])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        Ok(RealRows(text(entry, "realfaces.csv")?))
+    }
+}
 
 /// A file's used frames (every `stride`-th row with success = 1) and its skipped count.
 fn frames_of(input: &RealInput, stride: usize) -> Result<(Vec<[f64; AU_COUNT]>, usize)> {
@@ -96,21 +105,48 @@ fn mean_abs(pairs: impl Iterator<Item = (f64, f64)>) -> (usize, f64) {
     (n, if n > 0 { sum / n as f64 } else { f64::NAN })
 }
 
-/// Transfers every file in both settings for every seed (cached per seed).
-pub fn run(
-    inp: &Inputs,
-    cache: &Cache,
-    record: Record,
-    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
-) -> Result<Vec<FileRow>> {
-    let spec = inp.spec;
-    let stride = spec.realfaces.frame_stride;
-    let mut files = Vec::with_capacity(inp.files.len());
+/// What the real files hold, as key text: `file=sha256` per listed file.
+pub fn content(files: &[RealInput]) -> Result<String> {
     let mut content = String::new();
-    for f in inp.files {
+    for f in files {
         let bytes =
             std::fs::read(&f.path).with_context(|| format!("{}: cannot read", f.path.display()))?;
         content.push_str(&format!("{}={}\n", f.file, cache::sha256(&bytes)));
+    }
+    Ok(content)
+}
+
+/// One seed's real-data transfer: the files' content, `realfaces.frame_stride`,
+/// `table2.normalization`, and the keys of the seed's unified network, the dataset and the
+/// basis.
+pub fn unit(
+    spec: &Spec,
+    content: &str,
+    train_key: &str,
+    dataset_key: &str,
+    basis_key: Option<&str>,
+) -> Unit {
+    let mut deps = vec![train_key, dataset_key];
+    deps.extend(basis_key);
+    Unit::new(
+        "realfaces",
+        REALFACES_VERSION,
+        &format!(
+            "{content}realfaces.frame_stride = {}\ntable2.normalization = {}\n",
+            spec.realfaces.frame_stride,
+            spec.table2_normalization.name()
+        ),
+        &deps,
+    )
+}
+
+/// Transfers every file in both settings for every seed (cached per seed).
+pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Vec<FileRow>> {
+    let spec = inp.spec;
+    let stride = spec.realfaces.frame_stride;
+    let mut files = Vec::with_capacity(inp.files.len());
+    let content = content(inp.files)?;
+    for f in inp.files {
         files.push(frames_of(f, stride)?);
     }
     let kind = spec.table2_normalization;
@@ -125,100 +161,76 @@ pub fn run(
     };
     let mut out = Vec::new();
     for (seed, train_key, mlp) in &inp.unified {
-        let mut deps = vec![train_key.as_str(), inp.dataset_key];
-        deps.extend(inp.basis_key);
-        let key = cache::key(
-            "realfaces",
-            REALFACES_VERSION,
-            &format!(
-                "{content}realfaces.frame_stride = {stride}\ntable2.normalization = {}\n",
-                kind.name()
-            ),
-            &deps,
-        );
-        let t = Instant::now();
-        let text = match cache.get("realfaces", &key)? {
-            Some(e) => {
-                record("realfaces", &key, true, t);
-                String::from_utf8(e.read("realfaces.csv")?)?
-            }
-            None => {
-                // One clip per file and setting; clips run in parallel. The normalized clips
-                // carry each file's map already applied (in f32, as the network sees them).
-                let mut clips: Vec<Vec<[f64; AU_COUNT]>> = Vec::new();
-                for setting in Setting::ALL {
-                    for ((reference, _), map) in files.iter().zip(&maps) {
-                        clips.push(match setting {
-                            Setting::Unnormalized => reference.clone(),
-                            Setting::Normalized => {
-                                let flat: Vec<f32> =
-                                    reference.iter().flatten().map(|&v| v as f32).collect();
-                                map.apply(&flat)
-                                    .chunks_exact(AU_COUNT)
-                                    .map(|c| std::array::from_fn(|k| c[k] as f64))
-                                    .collect()
-                            }
-                        });
-                    }
-                }
-                let progress = bar(clips.len() as u64, "realfaces");
-                let tick = || progress.inc(1);
-                let transferred = transfer(
-                    inp.model,
-                    inp.basis,
-                    inp.reader,
-                    inp.observer,
-                    mlp,
-                    None,
-                    &clips,
-                    &params,
-                    &tick,
-                )
-                .with_context(|| format!("transferring the real files (seed {seed})"))?;
-                progress.finish_and_clear();
-                let mut rows = Vec::new();
-                for (ci, frames) in transferred.iter().enumerate() {
-                    let setting = Setting::ALL[ci / files.len()];
-                    let i = ci % files.len();
-                    let (reference, skipped) = &files[i];
-                    let got: Vec<[f64; AU_COUNT]> = frames.iter().map(|f| f.aus).collect();
-                    let raised: Vec<_> = reference
-                        .iter()
-                        .zip(&got)
-                        .filter(|(r, _)| r[AU01] >= BROW_RAISE && r[AU02] >= BROW_RAISE)
-                        .collect();
-                    rows.push(FileRow {
-                        seed: *seed,
-                        file: inp.files[i].file.clone(),
-                        person: inp.files[i].person.clone(),
-                        setting,
-                        frames: reference.len(),
-                        skipped: *skipped,
-                        mse: super::table2::au_mse(reference, &got),
-                        smile: mean_abs(
-                            reference
-                                .iter()
-                                .zip(&got)
-                                .filter(|(r, _)| r[AU12] >= SMILE_AU12)
-                                .map(|(r, g)| (r[AU12], g[AU12])),
-                        ),
-                        brow: {
-                            let (n, a) = mean_abs(raised.iter().map(|(r, g)| (r[AU01], g[AU01])));
-                            let (_, b) = mean_abs(raised.iter().map(|(r, g)| (r[AU02], g[AU02])));
-                            (n, a, b)
-                        },
+        let unit = unit(spec, &content, train_key, inp.dataset_key, inp.basis_key);
+        let RealRows(text) = stages.get_or_compute(&unit, |stages| {
+            // One clip per file and setting; clips run in parallel. The normalized clips
+            // carry each file's map already applied (in f32, as the network sees them).
+            let mut clips: Vec<Vec<[f64; AU_COUNT]>> = Vec::new();
+            for setting in Setting::ALL {
+                for ((reference, _), map) in files.iter().zip(&maps) {
+                    clips.push(match setting {
+                        Setting::Unnormalized => reference.clone(),
+                        Setting::Normalized => {
+                            let flat: Vec<f32> =
+                                reference.iter().flatten().map(|&v| v as f32).collect();
+                            map.apply(&flat)
+                                .chunks_exact(AU_COUNT)
+                                .map(|c| std::array::from_fn(|k| c[k] as f64))
+                                .collect()
+                        }
                     });
                 }
-                let text = csv(&rows);
-                cache.put(
-                    "realfaces",
-                    &key,
-                    &[("realfaces.csv".into(), text.clone().into_bytes())],
-                )?;
-                record("realfaces", &key, false, t);
-                text
             }
-        };
+            let progress = stages.bar(clips.len() as u64, "realfaces");
+            let tick = || progress.inc(1);
+            let transferred = transfer(
+                inp.model,
+                inp.basis,
+                inp.reader,
+                inp.observer,
+                mlp,
+                None,
+                &clips,
+                &params,
+                &tick,
+            )
+            .with_context(|| format!("transferring the real files (seed {seed})"))?;
+            progress.finish_and_clear();
+            let mut rows = Vec::new();
+            for (ci, frames) in transferred.iter().enumerate() {
+                let setting = Setting::ALL[ci / files.len()];
+                let i = ci % files.len();
+                let (reference, skipped) = &files[i];
+                let got: Vec<[f64; AU_COUNT]> = frames.iter().map(|f| f.aus).collect();
+                let raised: Vec<_> = reference
+                    .iter()
+                    .zip(&got)
+                    .filter(|(r, _)| r[AU01] >= BROW_RAISE && r[AU02] >= BROW_RAISE)
+                    .collect();
+                rows.push(FileRow {
+                    seed: *seed,
+                    file: inp.files[i].file.clone(),
+                    person: inp.files[i].person.clone(),
+                    setting,
+                    frames: reference.len(),
+                    skipped: *skipped,
+                    mse: super::table2::au_mse(reference, &got),
+                    smile: mean_abs(
+                        reference
+                            .iter()
+                            .zip(&got)
+                            .filter(|(r, _)| r[AU12] >= SMILE_AU12)
+                            .map(|(r, g)| (r[AU12], g[AU12])),
+                    ),
+                    brow: {
+                        let (n, a) = mean_abs(raised.iter().map(|(r, g)| (r[AU01], g[AU01])));
+                        let (_, b) = mean_abs(raised.iter().map(|(r, g)| (r[AU02], g[AU02])));
+                        (n, a, b)
+                    },
+                });
+            }
+            Ok(RealRows(csv(&rows)))
+        })?;
         out.extend(from_csv(&text, "realfaces.csv")?);
     }
     Ok(out)

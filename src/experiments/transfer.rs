@@ -297,7 +297,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     }
     let mut write = |name: &str, bytes: &[u8]| -> Result<()> {
         let path = out.join(name);
-        write_atomic(&path, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
+        write_atomic(&path, bytes)?;
         written.push(path);
         Ok(())
     };

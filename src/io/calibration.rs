@@ -37,10 +37,10 @@ pub struct CalibrationTable {
 
 #[derive(Debug, thiserror::Error)]
 pub enum CalibrationFileError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("{path}:{line}: {message}")]
     Row {
@@ -91,9 +91,9 @@ impl CalibrationTable {
 
 /// Reads and checks the table: every AU once, known controls, positive finite gains.
 pub fn read_calibration(path: &Path) -> Result<CalibrationTable, CalibrationFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CalibrationFileError::Io {
+    let text = std::fs::read_to_string(path).map_err(|cause| CalibrationFileError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     })?;
     parse_calibration(&text, path)
 }

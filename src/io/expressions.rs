@@ -18,8 +18,8 @@ pub fn default_expressions_path() -> PathBuf {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ExpressionFileError {
-    #[error("{path}: {source}")]
-    Csv { path: PathBuf, source: csv::Error },
+    #[error("{path}: {cause}")]
+    Csv { path: PathBuf, cause: csv::Error },
     #[error("{path}:{line}: {message}")]
     Row {
         path: PathBuf,
@@ -83,9 +83,9 @@ pub fn controls_activations(controls: &[(String, f64)]) -> Result<Activations, S
 
 /// Reads W_e for the six expressions.
 pub fn read_expressions(path: &Path) -> Result<ExpressionWeights, ExpressionFileError> {
-    let csv_err = |source| ExpressionFileError::Csv {
+    let csv_err = |cause| ExpressionFileError::Csv {
         path: path.to_path_buf(),
-        source,
+        cause,
     };
     let (header, records) = super::commented_csv(path).map_err(csv_err)?;
     if header != ["expression", "control", "weight", "reason"] {

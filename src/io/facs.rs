@@ -17,8 +17,8 @@ pub const DEFAULT_AU_MUSCLES: &str = "experiments/au_muscles.csv";
 
 #[derive(Debug, thiserror::Error)]
 pub enum FacsFileError {
-    #[error("{path}: {source}")]
-    Csv { path: PathBuf, source: csv::Error },
+    #[error("{path}: {cause}")]
+    Csv { path: PathBuf, cause: csv::Error },
     #[error("{path}:{line}: {message}")]
     Row {
         path: PathBuf,
@@ -47,9 +47,9 @@ impl FacsMaps {
 }
 
 fn rows(path: &Path) -> Result<Vec<(u64, Vec<String>)>, FacsFileError> {
-    let err = |source| FacsFileError::Csv {
+    let err = |cause| FacsFileError::Csv {
         path: path.to_path_buf(),
-        source,
+        cause,
     };
     let (_, records) = super::commented_csv(path).map_err(err)?;
     Ok(records

@@ -16,10 +16,10 @@ pub fn default_mesh_path() -> PathBuf {
 
 #[derive(Debug, thiserror::Error)]
 pub enum MeshFileError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Read {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("{path}:{line}: {message}")]
     Parse {
@@ -27,15 +27,15 @@ pub enum MeshFileError {
         line: usize,
         message: String,
     },
-    #[error("{path}: {source}")]
-    Invalid { path: PathBuf, source: MeshError },
+    #[error("{path}: {cause}")]
+    Invalid { path: PathBuf, cause: MeshError },
 }
 
 /// Reads an OBJ face mesh and converts centimetres to metres.
 pub fn read_obj(path: &Path) -> Result<Mesh, MeshFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| MeshFileError::Read {
+    let text = std::fs::read_to_string(path).map_err(|cause| MeshFileError::Read {
         path: path.to_path_buf(),
-        source,
+        cause,
     })?;
     parse_obj(&text).map_err(|e| match e {
         ObjError::Parse { line, message } => MeshFileError::Parse {
@@ -43,9 +43,9 @@ pub fn read_obj(path: &Path) -> Result<Mesh, MeshFileError> {
             line,
             message,
         },
-        ObjError::Mesh(source) => MeshFileError::Invalid {
+        ObjError::Mesh(cause) => MeshFileError::Invalid {
             path: path.to_path_buf(),
-            source,
+            cause,
         },
     })
 }

@@ -76,10 +76,10 @@ pub struct OpenFaceFile {
 
 #[derive(Debug, thiserror::Error)]
 pub enum OpenFaceError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("{path}: the file is empty")]
     Empty { path: PathBuf },
@@ -104,8 +104,8 @@ pub enum OpenFaceError {
         line: usize,
         column: String,
     },
-    #[error("{path}: {source}")]
-    Polars { path: PathBuf, source: PolarsError },
+    #[error("{path}: {cause}")]
+    Polars { path: PathBuf, cause: PolarsError },
 }
 
 fn pose_columns() -> [&'static str; 6] {
@@ -120,9 +120,9 @@ fn au_column(k: usize) -> String {
 
 /// Reads an OpenFace CSV file.
 pub fn read_openface(path: &Path) -> Result<OpenFaceFile, OpenFaceError> {
-    let bytes = std::fs::read(path).map_err(|source| OpenFaceError::Io {
+    let bytes = std::fs::read(path).map_err(|cause| OpenFaceError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     })?;
     parse_openface(bytes, path)
 }
@@ -248,15 +248,15 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
         .with_parse_options(CsvParseOptions::default().with_truncate_ragged_lines(false))
         .into_reader_with_file_handle(Cursor::new(bytes.as_slice()))
         .finish()
-        .map_err(|source| OpenFaceError::Polars { path: p(), source })?;
+        .map_err(|cause| OpenFaceError::Polars { path: p(), cause })?;
 
     let column = |name: &str| -> Result<Vec<Option<f64>>, OpenFaceError> {
         let series = df
             .column(name)
-            .map_err(|source| OpenFaceError::Polars { path: p(), source })?;
+            .map_err(|cause| OpenFaceError::Polars { path: p(), cause })?;
         let values = series
             .f64()
-            .map_err(|source| OpenFaceError::Polars { path: p(), source })?;
+            .map_err(|cause| OpenFaceError::Polars { path: p(), cause })?;
         Ok(values
             .downcast_iter()
             .flat_map(|arr| arr.iter().map(|v| v.copied()))
@@ -383,8 +383,7 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
 /// rotation 3, translation and landmarks 1, timestamp 3, confidence 2). The write is atomic.
 pub fn write_openface(path: &Path, rows: &[FaceRow]) -> anyhow::Result<()> {
     let bytes = openface_bytes(rows)?;
-    crate::io::atomic::write_atomic(path, &bytes)
-        .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", path.display()))
+    Ok(crate::io::atomic::write_atomic(path, &bytes)?)
 }
 
 /// The bytes `write_openface` writes.

@@ -79,8 +79,8 @@ impl ReachRow {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReachFileError {
-    #[error("{path}: {source}")]
-    Csv { path: PathBuf, source: csv::Error },
+    #[error("{path}: {cause}")]
+    Csv { path: PathBuf, cause: csv::Error },
     #[error("{path}:{line}: {message}")]
     Row {
         path: PathBuf,
@@ -129,9 +129,9 @@ fn band(lo: &str, hi: &str, what: &str) -> Result<Option<(f64, f64)>, String> {
 
 /// Reads and checks the table.
 pub fn read_reach(path: &Path) -> Result<Vec<ReachRow>, ReachFileError> {
-    let csv_err = |source| ReachFileError::Csv {
+    let csv_err = |cause| ReachFileError::Csv {
         path: path.to_path_buf(),
-        source,
+        cause,
     };
     let (header, records) = super::commented_csv(path).map_err(csv_err)?;
     if header != HEADER {

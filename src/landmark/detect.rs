@@ -65,7 +65,7 @@ impl Detector {
         let values = |i: usize| {
             graph::values(&out[i]).map_err(|source| GraphError::Candle {
                 name: "face_detection_short_range output".into(),
-                source,
+                cause: source,
             })
         };
         let (boxes, scores) = (values(0)?, values(1)?);

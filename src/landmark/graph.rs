@@ -15,11 +15,10 @@ use thiserror::Error;
 
 #[derive(Debug, Error)]
 pub enum GraphError {
-    #[error("{name}: {source}")]
+    #[error("{name}: {cause}")]
     Candle {
         name: String,
-        #[source]
-        source: candle_core::Error,
+        cause: candle_core::Error,
     },
     #[error("{name}: {message}")]
     Format { name: String, message: String },
@@ -123,7 +122,7 @@ impl Graph {
         let outputs: Vec<String> = json("outputs", &field("outputs")?).map_err(format)?;
         let candle = |source| GraphError::Candle {
             name: name.to_string(),
-            source,
+            cause: source,
         };
         let mut constants = BTreeMap::new();
         for (key, t) in
@@ -151,7 +150,7 @@ impl Graph {
                 .apply(op, &values)
                 .map_err(|source| GraphError::Candle {
                     name: format!("{} operator `{}`", self.name, op.output),
-                    source,
+                    cause: source,
                 })?;
             let got = nhwc_dims(&out);
             if got != op.output_shape {
@@ -178,7 +177,7 @@ impl Graph {
                     t.permute((0, 2, 3, 1))
                         .map_err(|source| GraphError::Candle {
                             name: self.name.clone(),
-                            source,
+                            cause: source,
                         })
                 } else {
                     Ok(t.clone())

@@ -151,7 +151,7 @@ pub(crate) fn sigmoid(x: f64) -> f64 {
 fn chw_tensor(crop: &[f32], size: usize) -> Result<Tensor, GraphError> {
     let candle = |source| GraphError::Candle {
         name: "input".into(),
-        source,
+        cause: source,
     };
     Tensor::from_slice(crop, (1, size, size, 3), &Device::Cpu)
         .and_then(|t| t.permute((0, 3, 1, 2))?.contiguous())
@@ -161,7 +161,7 @@ fn chw_tensor(crop: &[f32], size: usize) -> Result<Tensor, GraphError> {
 fn to_vec(t: &Tensor) -> Result<Vec<f32>, GraphError> {
     graph::values(t).map_err(|source| GraphError::Candle {
         name: "output".into(),
-        source,
+        cause: source,
     })
 }
 

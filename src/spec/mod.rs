@@ -32,6 +32,8 @@ pub enum SpecError {
     },
     #[error("`extends` cycle: {0}")]
     Cycle(String),
+    #[error("{path}: the spec is empty (it sets no key; a spec names at least `experiment` or `extends`)")]
+    Empty { path: PathBuf },
     #[error("--set {text}: {message}")]
     Override { text: String, message: String },
 }

@@ -197,25 +197,48 @@ pub fn merge(base: &mut BTreeMap<String, Node>, over: BTreeMap<String, Node>) {
 
 /// Loads `path` with its `extends` chain (each relative to the file naming it), base first.
 pub fn load(path: &Path) -> Result<BTreeMap<String, Node>, SpecError> {
-    let mut chain: Vec<PathBuf> = Vec::new();
+    let mut chain: Vec<(PathBuf, String)> = Vec::new();
     load_chain(path, &mut chain)
 }
 
-fn load_chain(path: &Path, chain: &mut Vec<PathBuf>) -> Result<BTreeMap<String, Node>, SpecError> {
+/// `path` relative to the working folder where it lies below it, else as it is.
+fn shown(path: &Path) -> String {
+    let cwd = std::env::current_dir().and_then(|d| d.canonicalize());
+    match cwd.as_ref().map(|d| path.strip_prefix(d)) {
+        Ok(Ok(rel)) => rel.display().to_string(),
+        _ => path.display().to_string(),
+    }
+}
+
+/// Loads one file of an `extends` chain; `chain` holds the files above it, each with how it
+/// names its base (`file:line`, for the cycle message).
+fn load_chain(
+    path: &Path,
+    chain: &mut Vec<(PathBuf, String)>,
+) -> Result<BTreeMap<String, Node>, SpecError> {
     let canonical = path.canonicalize().map_err(|e| SpecError::Io {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
-    if chain.contains(&canonical) {
-        let cycle: Vec<String> = chain
-            .iter()
-            .chain(std::iter::once(&canonical))
-            .map(|p| p.display().to_string())
-            .collect();
-        return Err(SpecError::Cycle(cycle.join(" -> ")));
+    if chain.iter().any(|(p, _)| *p == canonical) {
+        let mut steps: Vec<String> = chain.iter().map(|(_, at)| at.clone()).collect();
+        steps.push(shown(&canonical));
+        return Err(SpecError::Cycle(steps.join(" -> ")));
     }
-    chain.push(canonical);
     let mut own = parse_file(path)?;
+    if own.is_empty() {
+        return Err(SpecError::Empty {
+            path: path.to_path_buf(),
+        });
+    }
+    let line = match own.get("extends").map(|n| &n.origin) {
+        Some(Origin::File { line, .. }) => format!(":{line}"),
+        _ => String::new(),
+    };
+    chain.push((
+        canonical.clone(),
+        format!("{}{line} extends", shown(&canonical)),
+    ));
     let result = match own.remove("extends") {
         None => own,
         Some(Node {

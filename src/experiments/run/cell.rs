@@ -7,6 +7,7 @@ use crate::dataset::{self, Sample};
 use crate::experiments::face::FaceSource;
 use crate::experiments::inversion;
 use crate::experiments::realfaces;
+use crate::experiments::stage::{text, Artifact, StageRecord, Stages, Unit};
 use crate::experiments::table1::{self, Network, Row};
 use crate::experiments::table2_stage::{self, Table2Result};
 use crate::learn::{self, Curves, Mlp};
@@ -17,24 +18,9 @@ use crate::sim::geom::V3;
 use crate::sim::{FaceModel, SolveParams};
 use crate::spec::{Cell, Spec};
 use anyhow::{bail, Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
-use std::time::Instant;
 
 use super::*;
-
-pub(super) fn bar(len: u64, message: &str) -> ProgressBar {
-    let b = ProgressBar::new(len);
-    b.set_style(
-        ProgressStyle::with_template(
-            "{msg:>10} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    b.set_message(message.to_string());
-    b
-}
 
 pub(super) fn basis_bytes(b: &LinearBasis) -> Vec<u8> {
     let mut out = Vec::new();
@@ -125,47 +111,77 @@ pub(super) struct CellResult {
     pub(super) samples: usize,
 }
 
+/// The basis file: its sizes, then the rest positions and the fields (f64, little-endian).
+impl Artifact for LinearBasis {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![("basis.bin".into(), basis_bytes(self))])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        basis_from(&entry.read("basis.bin")?)
+    }
+}
+
+/// Samples per cached chunk of the dataset stage (250: 24 chunks of the paper's 6,000).
+const DATASET_CHUNK: usize = 250;
+
+/// The training pairs as `dataset.csv`.
+struct Samples(Vec<Sample>);
+
+impl Artifact for Samples {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![(
+            "dataset.csv".into(),
+            dataset::to_csv(&self.0).into_bytes(),
+        )])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        let path = entry.path("dataset.csv").display().to_string();
+        Ok(Samples(dataset::from_csv(
+            &text(entry, "dataset.csv")?,
+            &path,
+        )?))
+    }
+}
+
+/// A trained network and its learning curves.
+pub(crate) struct Trained {
+    pub(crate) mlp: Mlp,
+    pub(crate) curves: Curves,
+}
+
+impl Artifact for Trained {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![
+            ("weights.safetensors".into(), self.mlp.to_safetensors()?),
+            ("curves.csv".into(), curves_csv(&self.curves).into_bytes()),
+        ])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        Ok(Trained {
+            mlp: Mlp::from_safetensors(&entry.read("weights.safetensors")?)?,
+            curves: curves_from(&text(entry, "curves.csv")?),
+        })
+    }
+}
+
 /// The linear basis of the cell's face (cached), when the spec solves from predictions.
 pub(super) fn load_basis(
     k: &Keys,
-    cache: &Cache,
+    stages: &mut Stages,
     model: &FaceModel,
     spec: &Spec,
-    record: &mut dyn FnMut(&str, &str, bool, Instant),
 ) -> Result<Option<LinearBasis>> {
     let Some(key) = &k.basis else {
         return Ok(None);
     };
-    let t = Instant::now();
-    if let Some(e) = cache.get("basis", key)? {
-        let b = basis_from(&e.read("basis.bin")?)?;
-        record("basis", key, true, t);
-        return Ok(Some(b));
-    }
-    let params = SolveParams {
-        tolerance: spec.dataset.tolerance,
-        ..SolveParams::default()
-    };
-    let b = LinearBasis::build(model, &params).context("building the linear basis")?;
-    cache.put("basis", key, &[("basis.bin".into(), basis_bytes(&b))])?;
-    record("basis", key, false, t);
-    Ok(Some(b))
-}
-
-/// A stage's record keeper for `cell`: (stage, key, cache hit, start time).
-pub(super) fn recorder<'a>(
-    cell: &'a str,
-    records: &'a mut Vec<StageRecord>,
-) -> impl FnMut(&str, &str, bool, Instant) + 'a {
-    move |stage, key, hit, t| {
-        records.push(StageRecord {
-            cell: cell.into(),
-            stage: stage.into(),
-            key: key.into(),
-            hit,
-            seconds: t.elapsed().as_secs_f64(),
-        })
-    }
+    let basis = stages.get_or_compute(&Unit::keyed("basis", key), |_| {
+        let params = SolveParams {
+            tolerance: spec.dataset.tolerance,
+            ..SolveParams::default()
+        };
+        LinearBasis::build(model, &params).context("building the linear basis")
+    })?;
+    Ok(Some(basis))
 }
 
 pub(super) fn run_cell(
@@ -176,124 +192,95 @@ pub(super) fn run_cell(
 ) -> Result<CellResult> {
     let spec = &cell.spec;
     let k = keys(spec, a)?;
-    let mut record = recorder(&cell.name, records);
+    let mut stages = Stages::new(cache, &cell.name, records);
     let source = FaceSource::of_spec(spec);
 
-    // Dataset (and the basis it starts from): the clean faces, then the detector's noise.
-    let t = Instant::now();
-    let read = |e: &Entry| -> Result<Vec<Sample>> {
-        let text = String::from_utf8(e.read("dataset.csv")?)?;
-        dataset::from_csv(&text, &e.path("dataset.csv").display().to_string())
+    // Dataset (and the basis it starts from): the clean faces, then the detector's noise,
+    // cached apart so that a noise sweep solves the faces once.
+    let clean_key = k.clean_dataset.as_ref().unwrap_or(&k.dataset);
+    let clean = |stages: &mut Stages| {
+        stages.get_or_compute(&Unit::keyed("dataset", clean_key), |stages| {
+            let model = source.model()?;
+            let reader = FaceReader::new(spec.observer_source)?;
+            let observer = reader.observer(&model, spec_calibration(spec)?)?;
+            let basis = load_basis(&k, stages, &model, spec)?;
+            let jobs = dataset::jobs(&spec.dataset);
+            let weights = source.weights()?;
+            let progress = stages.bar(jobs.len() as u64, "dataset");
+            let tick = || progress.inc(1);
+            // Cached in chunks, so a killed run loses at most one chunk of solving; every
+            // sample has its own stream, so the chunks join to the same bytes.
+            let mut samples = Vec::with_capacity(jobs.len());
+            for (i, chunk) in jobs.chunks(DATASET_CHUNK).enumerate() {
+                let unit = Unit::new(
+                    "dataset_chunk",
+                    DATASET_VERSION,
+                    &format!("chunk = {i}\nsize = {DATASET_CHUNK}\n"),
+                    &[clean_key],
+                );
+                let before = progress.position();
+                let Samples(part) = stages.get_or_compute(&unit, |_| {
+                    Ok(Samples(dataset::generate(
+                        &model,
+                        &weights,
+                        &reader,
+                        &observer,
+                        basis.as_ref(),
+                        &a.facs.au_controls,
+                        &spec.dataset,
+                        spec.dataset.seed,
+                        chunk,
+                        &tick,
+                    )?))
+                })?;
+                // A cached chunk did not tick.
+                let ticked = progress.position() - before;
+                progress.inc(part.len() as u64 - ticked);
+                samples.extend(part);
+            }
+            progress.finish_and_clear();
+            Ok(Samples(samples))
+        })
     };
-    let cached = cache.get("dataset", &k.dataset)?;
-    let samples: Vec<Sample> = if let Some(e) = cached {
-        let s = read(&e)?;
-        record("dataset", &k.dataset, true, t);
-        s
-    } else {
-        let clean_key = k.clean_dataset.as_ref().unwrap_or(&k.dataset);
-        let clean = match cache.get("dataset", clean_key)? {
-            Some(e) => {
-                let s = read(&e)?;
-                record("dataset", clean_key, true, t);
-                s
-            }
-            None => {
-                let model = source.model()?;
-                let reader = FaceReader::new(spec.observer_source)?;
-                let observer = reader.observer(&model, spec_calibration(spec)?)?;
-                let basis = load_basis(&k, cache, &model, spec, &mut record)?;
-                let total = spec.dataset.pairs_per_expression * 6;
-                let progress = bar(total as u64, "dataset");
-                let tick = || progress.inc(1);
-                let s = dataset::generate(
-                    &model,
-                    &source.weights()?,
-                    &reader,
-                    &observer,
-                    basis.as_ref(),
-                    &a.facs.au_controls,
-                    &spec.dataset,
-                    spec.dataset.seed,
-                    &tick,
-                )?;
-                progress.finish_and_clear();
-                cache.put(
-                    "dataset",
-                    clean_key,
-                    &[("dataset.csv".into(), dataset::to_csv(&s).into_bytes())],
-                )?;
-                record("dataset", clean_key, false, t);
-                s
-            }
-        };
-        if k.clean_dataset.is_some() {
-            let t = Instant::now();
-            let noisy = dataset::add_noise(
+    let Samples(samples) = if k.clean_dataset.is_some() {
+        stages.get_or_compute(&Unit::keyed("dataset_noise", &k.dataset), |stages| {
+            let Samples(clean) = clean(stages)?;
+            Ok(Samples(dataset::add_noise(
                 &clean,
                 &source.weights()?,
                 &a.facs.au_controls,
                 &spec.dataset,
                 &spec.observer,
                 spec.dataset.seed,
-            );
-            cache.put(
-                "dataset",
-                &k.dataset,
-                &[("dataset.csv".into(), dataset::to_csv(&noisy).into_bytes())],
-            )?;
-            record("dataset_noise", &k.dataset, false, t);
-            noisy
-        } else {
-            clean
-        }
+            )))
+        })?
+    } else {
+        clean(&mut stages)?
     };
 
     // Training: every (seed, network).
-    let progress = bar(k.train.len() as u64, "train");
+    let progress = stages.bar(k.train.len() as u64, "train");
     let mut nets: BTreeMap<(u64, Network), Mlp> = BTreeMap::new();
     let mut curves = Vec::new();
     for ((seed, network), key) in &k.train {
-        let t = Instant::now();
-        let split = table1::split(&samples, spec.dataset.test_fraction, *seed);
-        let entry: Entry = match cache.get("train", key)? {
-            Some(e) => {
-                record("train", key, true, t);
-                e
-            }
-            None => {
-                let (train_pairs, test_pairs) =
-                    table1::network_pairs(*network, &samples, &split, &a.facs);
-                let mut rng = stream(*seed, &format!("train/{}", network.name()));
-                let mut uniform = || rng.uniform();
-                let (mlp, c) = learn::train(
-                    &train_pairs,
-                    &test_pairs,
-                    &spec.model,
-                    &spec.train,
-                    &mut uniform,
-                )
-                .with_context(|| format!("training the {} network, seed {seed}", network.name()))?;
-                let e = cache.put(
-                    "train",
-                    key,
-                    &[
-                        ("weights.safetensors".into(), mlp.to_safetensors()?),
-                        ("curves.csv".into(), curves_csv(&c).into_bytes()),
-                    ],
-                )?;
-                record("train", key, false, t);
-                e
-            }
-        };
-        nets.insert(
-            (*seed, *network),
-            Mlp::from_safetensors(&entry.read("weights.safetensors")?)?,
-        );
-        curves.push((
-            (*seed, *network),
-            curves_from(&String::from_utf8(entry.read("curves.csv")?)?),
-        ));
+        let trained = stages.get_or_compute(&Unit::keyed("train", key), |_| {
+            let split = table1::split(&samples, spec.dataset.test_fraction, *seed);
+            let (train_pairs, test_pairs) =
+                table1::network_pairs(*network, &samples, &split, &a.facs);
+            let mut rng = stream(*seed, &format!("train/{}", network.name()));
+            let mut uniform = || rng.uniform();
+            let (mlp, curves) = learn::train(
+                &train_pairs,
+                &test_pairs,
+                &spec.model,
+                &spec.train,
+                &mut uniform,
+            )
+            .with_context(|| format!("training the {} network, seed {seed}", network.name()))?;
+            Ok(Trained { mlp, curves })
+        })?;
+        nets.insert((*seed, *network), trained.mlp);
+        curves.push(((*seed, *network), trained.curves));
         progress.inc(1);
     }
     progress.finish_and_clear();
@@ -303,7 +290,7 @@ pub(super) fn run_cell(
     let mut inversion_out = None;
     let table2 = if wants_table2 {
         let model = source.model()?;
-        let basis = load_basis(&k, cache, &model, spec, &mut record)?;
+        let basis = load_basis(&k, &mut stages, &model, spec)?;
         let unified = k
             .train
             .iter()
@@ -322,7 +309,7 @@ pub(super) fn run_cell(
             basis: basis.as_ref(),
             calibration: &calibration,
         };
-        let t2 = table2_stage::run(&inputs, cache, &mut record, &bar)?;
+        let t2 = table2_stage::run(&inputs, &mut stages)?;
         if spec.tables.iter().any(|t| t == "inversion") {
             let basis = basis.as_ref().expect("inversion always has a basis key");
             let inverter = inversion::Inverter::new(&model, basis, &calibration)?;
@@ -338,9 +325,7 @@ pub(super) fn run_cell(
                 inversion::stage(
                     spec,
                     &source,
-                    cache,
-                    &mut record,
-                    &bar,
+                    &mut stages,
                     &keys,
                     &inverter,
                     &calibration,
@@ -360,7 +345,7 @@ pub(super) fn run_cell(
     let mut real_rows =
         |files: &[crate::io::realdata::RealInput]| -> Result<Vec<realfaces::FileRow>> {
             let model = source.model()?;
-            let basis = load_basis(&k, cache, &model, spec, &mut record)?;
+            let basis = load_basis(&k, &mut stages, &model, spec)?;
             let reader = FaceReader::new(spec.observer_source)?;
             let observer = reader.observer(&model, calibration.clone())?;
             let training: Vec<_> = samples.iter().map(|s| s.aus).collect();
@@ -381,7 +366,7 @@ pub(super) fn run_cell(
                 reader: &reader,
                 observer: &observer,
             };
-            realfaces::run(&inputs, cache, &mut record, &bar)
+            realfaces::run(&inputs, &mut stages)
         };
     let table2_real = match (&table2, &spec.table2_openface) {
         (Some(_), Some(file)) => Some(

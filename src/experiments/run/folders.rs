@@ -2,7 +2,6 @@
 //! state of the checkout, and the copies into `paper-tables/`.
 
 use crate::io::atomic::write_atomic;
-use crate::spec::Spec;
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
@@ -18,6 +17,8 @@ pub(super) fn sanitize(name: &str) -> String {
         .collect()
 }
 
+/// `git args` in the working folder; `None` outside a git checkout, which the manifest
+/// records as "unknown".
 pub(super) fn git(args: &[&str]) -> Option<String> {
     let out = std::process::Command::new("git").args(args).output().ok()?;
     out.status
@@ -53,7 +54,8 @@ pub(super) fn checkout_dirty(outputs: &[PathBuf]) -> Option<bool> {
 pub(super) fn new_run_dir(experiment_dir: &Path) -> Result<PathBuf> {
     std::fs::create_dir_all(experiment_dir)
         .with_context(|| format!("{}: cannot create", experiment_dir.display()))?;
-    let mut n = std::fs::read_dir(experiment_dir)?
+    let mut n = std::fs::read_dir(experiment_dir)
+        .with_context(|| format!("{}: cannot list", experiment_dir.display()))?
         .filter_map(|e| e.ok())
         .filter_map(|e| {
             let name = e.file_name();
@@ -72,7 +74,13 @@ pub(super) fn new_run_dir(experiment_dir: &Path) -> Result<PathBuf> {
         }
         let dir = experiment_dir.join(format!("run-{n:04}{PARTIAL}"));
         match std::fs::create_dir(&dir) {
-            Ok(()) => return Ok(dir),
+            Ok(()) => {
+                let owner = dir.join(OWNER);
+                std::fs::write(&owner, format!("{} {}\n", host(), std::process::id()))
+                    .with_context(|| format!("{}: cannot write", owner.display()))?;
+                remove_dead_runs(experiment_dir, &dir);
+                return Ok(dir);
+            }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             Err(e) => return Err(e).with_context(|| format!("{}: cannot create", dir.display())),
         }
@@ -82,6 +90,56 @@ pub(super) fn new_run_dir(experiment_dir: &Path) -> Result<PathBuf> {
 /// Suffix of a run folder whose run has not finished.
 pub(super) const PARTIAL: &str = ".partial";
 
+/// The file in a `.partial` folder naming the run that owns it: `host pid`.
+const OWNER: &str = ".owner";
+
+fn host() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .unwrap_or_else(|_| "unknown".into())
+}
+
+/// Whether the run that owns a `.partial` folder is gone: its process is not running on this
+/// machine. A folder of another machine (a shared file system) is never judged; on a system
+/// without `/proc` nothing is.
+fn owner_is_gone(partial: &Path) -> bool {
+    let Ok(owner) = std::fs::read_to_string(partial.join(OWNER)) else {
+        // Runs before owners were recorded; a live one would be seconds old.
+        return std::fs::metadata(partial)
+            .and_then(|m| m.modified())
+            .is_ok_and(|t| t.elapsed().is_ok_and(|age| age.as_secs() > 24 * 3600));
+    };
+    let mut words = owner.split_whitespace();
+    let (Some(owner_host), Some(pid)) = (words.next(), words.next()) else {
+        return false;
+    };
+    let proc = Path::new("/proc");
+    owner_host == host() && proc.is_dir() && !proc.join(pid).exists()
+}
+
+/// Removes the `.partial` folders of runs that died (killed, crashed) before finishing, saying
+/// so; `own` (the new run's folder) and folders of live runs are kept.
+fn remove_dead_runs(experiment_dir: &Path, own: &Path) {
+    let Ok(entries) = std::fs::read_dir(experiment_dir) else {
+        return;
+    };
+    for path in entries.filter_map(|e| e.ok().map(|e| e.path())) {
+        let partial = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with("run-") && n.ends_with(PARTIAL));
+        if partial && path != own && owner_is_gone(&path) {
+            match std::fs::remove_dir_all(&path) {
+                Ok(()) => eprintln!(
+                    "removed {}: its run stopped before finishing",
+                    path.display()
+                ),
+                Err(e) => eprintln!("{}: cannot remove ({e})", path.display()),
+            }
+        }
+    }
+}
+
 /// Renames a finished run's folder to `run-NNNN` and returns the new path.
 pub(super) fn finish_run_dir(partial: &Path) -> Result<PathBuf> {
     let name = partial
@@ -90,6 +148,8 @@ pub(super) fn finish_run_dir(partial: &Path) -> Result<PathBuf> {
         .and_then(|n| n.strip_suffix(PARTIAL))
         .context("a partial run folder's name ends in .partial")?;
     let done = partial.with_file_name(name);
+    let owner = partial.join(OWNER);
+    std::fs::remove_file(&owner).with_context(|| format!("{}: cannot remove", owner.display()))?;
     std::fs::rename(partial, &done)
         .with_context(|| format!("{}: cannot rename to {name}", partial.display()))?;
     Ok(done)
@@ -100,18 +160,48 @@ pub(super) fn point_latest(experiment_dir: &Path, run: &Path) -> Result<()> {
     let tmp = experiment_dir.join(format!(".latest-{}", std::process::id()));
     let _ = std::fs::remove_file(&tmp);
     #[cfg(unix)]
-    std::os::unix::fs::symlink(name, &tmp)?;
+    std::os::unix::fs::symlink(name, &tmp)
+        .with_context(|| format!("{}: cannot create the link", tmp.display()))?;
     #[cfg(not(unix))]
-    std::fs::write(&tmp, name.to_string_lossy().as_bytes())?;
-    std::fs::rename(&tmp, experiment_dir.join("latest"))?;
+    std::fs::write(&tmp, name.to_string_lossy().as_bytes())
+        .with_context(|| format!("{}: cannot write", tmp.display()))?;
+    let latest = experiment_dir.join("latest");
+    std::fs::rename(&tmp, &latest)
+        .with_context(|| format!("{}: cannot replace", latest.display()))?;
     Ok(())
 }
 
-/// Writes `paper-tables/<report prefix><name>`.
-pub(super) fn paper_table(out_root: &Path, spec: &Spec, name: &str, text: &str) -> Result<()> {
-    let path = out_root
-        .join("paper-tables")
-        .join(format!("{}{name}", spec.report_prefix));
-    write_atomic(&path, text.as_bytes())
-        .with_context(|| format!("{}: cannot write", path.display()))
+/// Where a run's tables and figures go, and the overrides their captions name.
+pub(super) struct Publish {
+    pub(super) tables: PathBuf,
+    pub(super) figures: PathBuf,
+    /// The run's `--set` values (none for the committed record).
+    pub(super) overrides: Vec<String>,
+}
+
+impl Publish {
+    /// Writes the table `name` (Markdown or LaTeX) into the tables folder; an overridden run's
+    /// table says so under its title (Markdown) or in a first comment line (LaTeX).
+    pub(super) fn table(&self, name: &str, text: &str) -> Result<()> {
+        let text = if self.overrides.is_empty() {
+            text.to_string()
+        } else {
+            let sets: Vec<String> = self
+                .overrides
+                .iter()
+                .map(|s| format!("--set {s}"))
+                .collect();
+            if name.ends_with(".tex") {
+                format!("% run with overrides: {}\n{text}", sets.join(" "))
+            } else {
+                let (title, rest) = text.split_once('\n').unwrap_or((text, ""));
+                let sets: Vec<String> = sets.iter().map(|s| format!("`{s}`")).collect();
+                format!(
+                    "{title}\n\nRun with overrides: {}.\n{rest}",
+                    sets.join(", ")
+                )
+            }
+        };
+        Ok(write_atomic(&self.tables.join(name), text.as_bytes())?)
+    }
 }

@@ -1,14 +1,17 @@
 //! The inputs a run's stages share (asset and data files by content) and the cache keys of
 //! a cell's basis, dataset and training stages.
 
-use crate::cache::{self};
+use crate::cache::{self, Cache, Lookup};
 use crate::dataset::SolveStart;
+use crate::experiments::stage::Unit;
 use crate::experiments::table1::Network;
+use crate::experiments::{headpose, inversion, pose_transfer, realfaces, table2_stage};
 use crate::io::expressions::default_expressions_path;
 use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
 use crate::io::mesh::default_mesh_path;
 use crate::io::observer_fit::read_any_calibration;
 use crate::observe::Calibration;
+use crate::spec::Cell;
 use crate::spec::Spec;
 use anyhow::{Context, Result};
 use std::path::Path;
@@ -130,4 +133,168 @@ pub(super) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
         clean_dataset,
         train,
     })
+}
+
+/// One unit of a cell's plan: what it is, and its unit when the key can be known without
+/// running (the pose transfer's key hashes the voluntary network, known once it is cached).
+pub struct Planned {
+    pub cell: String,
+    pub label: String,
+    pub unit: Option<Unit>,
+    /// Why the unit's key is not known yet.
+    pub waiting: Option<String>,
+}
+
+/// Every unit of work of a cell, in the order a run meets them, with their keys computed
+/// exactly as the stages compute them (the same functions), reading only the spec, the data
+/// files and, for the pose transfer, the cached voluntary network.
+pub(crate) fn plan(cell: &Cell, a: &Assets, cache: &Cache) -> Result<Vec<Planned>> {
+    let spec = &cell.spec;
+    let mut out = Vec::new();
+    let mut add = |label: String, unit: Option<Unit>, waiting: Option<String>| {
+        out.push(Planned {
+            cell: cell.name.clone(),
+            label,
+            unit,
+            waiting,
+        })
+    };
+    let tables = |t: &str| spec.tables.iter().any(|x| x == t);
+    let mut cohort_key = None;
+    if spec.tables.iter().any(|t| t != "headpose") {
+        let k = keys(spec, a)?;
+        if let Some(b) = &k.basis {
+            add("basis".into(), Some(Unit::keyed("basis", b)), None);
+        }
+        match &k.clean_dataset {
+            Some(clean) => {
+                add(
+                    "dataset (clean)".into(),
+                    Some(Unit::keyed("dataset", clean)),
+                    None,
+                );
+                add(
+                    "dataset_noise".into(),
+                    Some(Unit::keyed("dataset_noise", &k.dataset)),
+                    None,
+                );
+            }
+            None => add(
+                "dataset".into(),
+                Some(Unit::keyed("dataset", &k.dataset)),
+                None,
+            ),
+        }
+        for ((seed, network), key) in &k.train {
+            add(
+                format!("train {} seed {seed}", network.name()),
+                Some(Unit::keyed("train", key)),
+                None,
+            );
+        }
+        let unified: Vec<(u64, &str)> = k
+            .train
+            .iter()
+            .filter(|((_, n), _)| *n == Network::Unified)
+            .map(|((seed, _), key)| (*seed, key.as_str()))
+            .collect();
+        if tables("table2") {
+            let assets = format!("face={}\ndata={}\n", a.face, a.data(spec)?);
+            let cohort = table2_stage::cohort_unit(spec, &assets);
+            let mut first = None;
+            for (seed, train_key) in &unified {
+                let t = table2_stage::transfer_unit(
+                    spec,
+                    &cohort.key,
+                    train_key,
+                    &k.dataset,
+                    k.basis.as_deref(),
+                );
+                first.get_or_insert_with(|| t.key.clone());
+                add(format!("transfer seed {seed}"), Some(t), None);
+            }
+            if let Some(first) = first {
+                add(
+                    "renders".into(),
+                    Some(table2_stage::renders_unit(&first)),
+                    None,
+                );
+            }
+            if tables("inversion") {
+                if let Some((_, train_key)) = unified.first() {
+                    let mut inputs = vec![cohort.key.as_str(), train_key, k.dataset.as_str()];
+                    inputs.extend(k.basis.as_deref());
+                    add(
+                        "inversion".into(),
+                        Some(inversion::unit(spec, &inputs)),
+                        None,
+                    );
+                }
+            }
+            if let Some(file) = &spec.table2_openface {
+                let content = realfaces::content(&[crate::io::realdata::committed_input(file)])?;
+                for (seed, train_key) in &unified {
+                    add(
+                        format!("realfaces {file} seed {seed}"),
+                        Some(realfaces::unit(
+                            spec,
+                            &content,
+                            train_key,
+                            &k.dataset,
+                            k.basis.as_deref(),
+                        )),
+                        None,
+                    );
+                }
+            }
+            add("cohort".into(), Some(cohort.clone()), None);
+            cohort_key = Some(cohort.key);
+        }
+        if tables("realfaces") {
+            match crate::io::realdata::inputs(&spec.realfaces) {
+                Ok(files) => {
+                    let content = realfaces::content(&files)?;
+                    for (seed, train_key) in &unified {
+                        add(
+                            format!("realfaces seed {seed}"),
+                            Some(realfaces::unit(
+                                spec,
+                                &content,
+                                train_key,
+                                &k.dataset,
+                                k.basis.as_deref(),
+                            )),
+                            None,
+                        );
+                    }
+                }
+                Err(e) => add("realfaces".into(), None, Some(e.to_string())),
+            }
+        }
+    }
+    if tables("headpose") {
+        let data = headpose::data_unit(spec);
+        let train = headpose::train_unit(spec, &data.key);
+        let weights = match cache.inspect(train.stage, &train.key) {
+            Lookup::Hit(e) => Some(e.read("weights.safetensors")?),
+            _ => None,
+        };
+        add("headpose_data".into(), Some(data), None);
+        add("headpose_train".into(), Some(train), None);
+        if let Some(cohort_key) = &cohort_key {
+            match weights {
+                Some(w) => add(
+                    "pose_transfer".into(),
+                    Some(pose_transfer::unit(spec, cohort_key, &w)),
+                    None,
+                ),
+                None => add(
+                    "pose_transfer".into(),
+                    None,
+                    Some("its key needs the voluntary network (headpose_train)".into()),
+                ),
+            }
+        }
+    }
+    Ok(out)
 }

@@ -24,6 +24,7 @@ use crate::experiments::face::FaceSource;
 use crate::experiments::headpose;
 use crate::experiments::pose_transfer;
 use crate::experiments::realfaces;
+use crate::experiments::stage::{Stages, Unit};
 use crate::experiments::table1::Row;
 use crate::experiments::table2;
 use crate::experiments::table2_stage::{self};
@@ -35,7 +36,7 @@ mod folders;
 mod keys;
 mod table1_report;
 
-pub(crate) use cell::{curves_csv, curves_from};
+pub(crate) use cell::curves_csv;
 pub(crate) use keys::{spec_calibration, values_text};
 use {cell::*, folders::*, keys::*, table1_report::*};
 
@@ -49,21 +50,17 @@ const TRAIN_VERSION: u32 = 1;
 #[derive(Clone, Debug)]
 pub struct RunOptions {
     /// Results folder; the cache lives in `<results>/.cache`, tables and figures in
-    /// `<results>/../paper-tables` and `<results>/../figures`.
+    /// `<results>/../paper-tables` and `<results>/../figures` (see `publish`).
     pub results: PathBuf,
     pub sets: Vec<String>,
     pub threads: usize,
+    /// With `sets`: also write the tables and figures beside the results folder. Without it an
+    /// overridden run keeps them in its own run folder and the committed record is untouched.
+    pub publish: bool,
 }
 
-/// What one stage did.
-#[derive(Clone, Debug, PartialEq)]
-pub struct StageRecord {
-    pub cell: String,
-    pub stage: String,
-    pub key: String,
-    pub hit: bool,
-    pub seconds: f64,
-}
+pub use super::stage::StageRecord;
+pub(crate) use cell::Trained;
 
 #[derive(Clone, Debug)]
 pub struct RunSummary {
@@ -79,14 +76,14 @@ fn headpose_outputs(
     cell: &Cell,
     prefix: &str,
     single: bool,
-    out_root: &Path,
+    out: &Publish,
     cache: &Cache,
     records: &mut Vec<StageRecord>,
     write: &mut dyn FnMut(String, Vec<u8>) -> Result<()>,
 ) -> Result<Vec<u8>> {
     let spec = &cell.spec;
-    let mut record = recorder(&cell.name, records);
-    let out = headpose::stage(spec, cache, &mut record, &bar)?;
+    let publish = out;
+    let out = headpose::stage(spec, &mut Stages::new(cache, &cell.name, records))?;
     write(
         format!("{prefix}headpose_static.csv"),
         headpose::static_csv(&out.static_rows).into_bytes(),
@@ -109,14 +106,12 @@ fn headpose_outputs(
     )?;
     if single {
         let report = &spec.report_prefix;
-        write_atomic(
-            &out_root
-                .join("paper-tables")
-                .join(format!("{report}headpose.md")),
-            headpose::markdown(&out, spec).as_bytes(),
+        publish.table(
+            &format!("{report}headpose.md"),
+            &headpose::markdown(&out, spec),
         )?;
         let source = FaceSource::of_spec(spec);
-        let figures = out_root.join("figures").join(format!("{report}headpose"));
+        let figures = publish.figures.join(format!("{report}headpose"));
         headpose::figures(&figures, &out, spec, &source.model()?)?;
     }
     Ok(out.weights)
@@ -149,13 +144,27 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         out_root.join("paper-tables"),
     ]);
     let run_dir = new_run_dir(&experiment_dir)?;
+    // An overridden run is not the committed record: its tables and figures stay in its run
+    // folder (and say what was overridden) unless `--publish` asks otherwise.
+    let publish = Publish {
+        tables: if opts.sets.is_empty() || opts.publish {
+            out_root.join("paper-tables")
+        } else {
+            run_dir.join("paper-tables")
+        },
+        figures: if opts.sets.is_empty() || opts.publish {
+            out_root.join("figures")
+        } else {
+            run_dir.join("figures")
+        },
+        overrides: opts.sets.clone(),
+    };
     let mut records = Vec::new();
     let mut outputs: BTreeMap<String, String> = BTreeMap::new();
     let write =
         |rel: String, bytes: Vec<u8>, outputs: &mut BTreeMap<String, String>| -> Result<()> {
             let path = run_dir.join(&rel);
-            write_atomic(&path, &bytes)
-                .with_context(|| format!("{}: cannot write", path.display()))?;
+            write_atomic(&path, &bytes)?;
             outputs.insert(rel, cache::sha256(&bytes));
             Ok(())
         };
@@ -179,7 +188,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 cell,
                 &prefix,
                 cells.len() == 1,
-                &out_root,
+                &publish,
                 &cache,
                 &mut records,
                 &mut |rel, bytes| write(rel, bytes, &mut outputs),
@@ -210,14 +219,10 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             // Table 1 in the run folder.
             if cell.spec.tables.iter().any(|t| t == "table1") {
                 let report = &cell.spec.report_prefix;
-                let tables = out_root.join("paper-tables");
                 let md = table1_markdown(&result.rows, &cell.spec, result.samples);
-                write_atomic(&tables.join(format!("{report}table1.md")), md.as_bytes())?;
-                write_atomic(
-                    &tables.join(format!("{report}table1.tex")),
-                    table1_tex(&result.rows).as_bytes(),
-                )?;
-                let figures = out_root.join("figures").join(format!("{report}table1"));
+                publish.table(&format!("{report}table1.md"), &md)?;
+                publish.table(&format!("{report}table1.tex"), &table1_tex(&result.rows))?;
+                let figures = publish.figures.join(format!("{report}table1"));
                 table1_figures(&figures, &result)?;
             }
             write(
@@ -243,11 +248,13 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 ("inversion.md", &iv.timing_markdown),
             ] {
                 let path = run_dir.join(&prefix).join("timings").join(name);
-                write_atomic(&path, text.as_bytes())
-                    .with_context(|| format!("{}: cannot write", path.display()))?;
+                write_atomic(&path, text.as_bytes())?;
             }
             if cells.len() == 1 {
-                paper_table(&out_root, &cell.spec, "methods.md", &iv.markdown)?;
+                publish.table(
+                    &format!("{}methods.md", cell.spec.report_prefix),
+                    &iv.markdown,
+                )?;
             }
         }
         if let Some(t2) = &result.table2 {
@@ -276,16 +283,15 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             }
             if cells.len() == 1 {
                 let report = &cell.spec.report_prefix;
-                let tables = out_root.join("paper-tables");
-                write_atomic(
-                    &tables.join(format!("{report}table2.md")),
-                    table2_stage::markdown(&t2.rows, &cell.spec, &t2.reference, real).as_bytes(),
+                publish.table(
+                    &format!("{report}table2.md"),
+                    &table2_stage::markdown(&t2.rows, &cell.spec, &t2.reference, real),
                 )?;
-                write_atomic(
-                    &tables.join(format!("{report}table2.tex")),
-                    table2_stage::tex(&t2.rows, real).as_bytes(),
+                publish.table(
+                    &format!("{report}table2.tex"),
+                    &table2_stage::tex(&t2.rows, real),
                 )?;
-                let figures = out_root.join("figures").join(format!("{report}table2"));
+                let figures = publish.figures.join(format!("{report}table2"));
                 for (name, bytes) in &t2.renders {
                     write_atomic(&figures.join(name), bytes)?;
                 }
@@ -293,12 +299,9 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             }
             // Head pose from the cohorts, where the spec has the head-neck controller.
             if let Some(weights) = &voluntary {
-                let mut record = recorder(&cell.name, &mut records);
                 let rows = pose_transfer::stage(
                     &cell.spec,
-                    &cache,
-                    &mut record,
-                    &bar,
+                    &mut Stages::new(&cache, &cell.name, &mut records),
                     &t2.cohort_key,
                     weights,
                     &t2.reference,
@@ -310,7 +313,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 )?;
                 if cells.len() == 1 {
                     let md = pose_transfer::markdown(&rows);
-                    paper_table(&out_root, &cell.spec, "table2_pose.md", &md)?;
+                    publish.table(&format!("{}table2_pose.md", cell.spec.report_prefix), &md)?;
                 }
             }
         }
@@ -321,11 +324,9 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 &mut outputs,
             )?;
             if cells.len() == 1 {
-                write_atomic(
-                    &out_root
-                        .join("paper-tables")
-                        .join(format!("{}realfaces.md", cell.spec.report_prefix)),
-                    realfaces::markdown(rf, &cell.spec).as_bytes(),
+                publish.table(
+                    &format!("{}realfaces.md", cell.spec.report_prefix),
+                    &realfaces::markdown(rf, &cell.spec),
                 )?;
             }
         }
@@ -350,13 +351,8 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             sweep_csv(&sweep_rows).into_bytes(),
             &mut outputs,
         )?;
-        write_atomic(
-            &out_root
-                .join("paper-tables")
-                .join(format!("{experiment}.md")),
-            md.as_bytes(),
-        )?;
-        let dir = out_root.join("figures").join(&experiment);
+        publish.table(&format!("{experiment}.md"), &md)?;
+        let dir = publish.figures.join(&experiment);
         sweep_figure(&dir, &sweep_rows)?;
         if !sweep_table2.is_empty() {
             let names: Vec<&str> = sweep_table2.iter().map(|(n, _)| n.as_str()).collect();
@@ -390,46 +386,53 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     })
 }
 
-/// `facelab status`: which stages of each cell are cached.
-pub fn status(
-    spec_path: &Path,
-    sets: &[String],
-    results: &Path,
-) -> Result<Vec<(String, String, bool)>> {
+/// A unit's state in the cache, as `facelab status` reports it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum UnitState {
+    Cached,
+    Missing,
+    Damaged(String),
+    /// The key is not known until an earlier stage is cached (the reason).
+    Waiting(String),
+}
+
+/// One line of `facelab status`.
+#[derive(Clone, Debug)]
+pub struct StatusLine {
+    pub cell: String,
+    pub label: String,
+    pub unit: Option<Unit>,
+    pub state: UnitState,
+}
+
+/// `facelab status`: every unit of work of every cell and whether the cache holds it. Reads
+/// only: nothing is computed, removed or written.
+pub fn status(spec_path: &Path, sets: &[String], results: &Path) -> Result<Vec<StatusLine>> {
     let cells = spec::load(spec_path, sets)?;
     let a = assets()?;
     let cache = Cache::new(&results.join(".cache"));
     let mut out = Vec::new();
     for cell in &cells {
-        let k = keys(&cell.spec, &a)?;
-        let label = |s: &str| {
-            if cell.name.is_empty() {
-                s.to_string()
-            } else {
-                format!("{} [{}]", s, cell.name)
-            }
-        };
-        if let Some(b) = &k.basis {
-            out.push((label("basis"), b.clone(), cache.has("basis", b)));
-        }
-        out.push((
-            label("dataset"),
-            k.dataset.clone(),
-            cache.has("dataset", &k.dataset),
-        ));
-        for ((seed, network), key) in &k.train {
-            out.push((
-                label(&format!("train {} seed {seed}", network.name())),
-                key.clone(),
-                cache.has("train", key),
-            ));
+        for p in plan(cell, &a, &cache)? {
+            let state = match (&p.unit, p.waiting) {
+                (Some(u), _) => match cache.inspect(u.stage, &u.key) {
+                    crate::cache::Lookup::Hit(_) => UnitState::Cached,
+                    crate::cache::Lookup::Missing => UnitState::Missing,
+                    crate::cache::Lookup::Damaged { reason, .. } => UnitState::Damaged(reason),
+                },
+                (None, why) => UnitState::Waiting(why.unwrap_or_default()),
+            };
+            out.push(StatusLine {
+                cell: p.cell,
+                label: p.label,
+                unit: p.unit,
+                state,
+            });
         }
     }
     Ok(out)
 }
 
-/// `facelab verify`: reruns a run's resolved specs from scratch in a temporary folder and
-/// compares the hashes of every CSV. Returns the files that differ.
 pub fn verify(run_dir: &Path, threads: usize) -> Result<Vec<String>> {
     let manifest_path = run_dir.join("manifest.json");
     let manifest: serde_json::Value = serde_json::from_slice(
@@ -462,6 +465,7 @@ pub fn verify(run_dir: &Path, threads: usize) -> Result<Vec<String>> {
                 results: tmp.join("results"),
                 sets: Vec::new(),
                 threads,
+                publish: false,
             },
         );
         let summary = match summary {

@@ -7,15 +7,15 @@
 //!   unified network, the dataset (its AU range) and the basis;
 //! - `renders`: the first seed's transfer key.
 
-use std::time::Instant;
-
 use anyhow::{Context, Result};
 
-use crate::cache::{self, Cache};
+use crate::cache::Entry;
 use crate::cohort::CohortKind;
 use crate::dataset::reader::FaceReader;
 use crate::dataset::Sample;
 use crate::experiments::face::FaceSource;
+use crate::experiments::run;
+use crate::experiments::stage::{text, Artifact, Files, Stages, Unit};
 use crate::experiments::table2::{
     self, clip_count, clip_ranges, range_map, reference, reference_csv, reference_from_csv,
     training_range, transfer, transfers_csv, transfers_from_csv, RefFrame, Row, Setting,
@@ -66,72 +66,113 @@ pub struct Table2Result {
     pub renders: Vec<(String, Vec<u8>)>,
 }
 
-type Record<'r> = &'r mut dyn FnMut(&str, &str, bool, Instant);
+/// The reference frames of the cohorts, as `reference.csv`.
+struct Reference(Vec<RefFrame>);
 
-pub fn run(
-    inp: &Inputs,
-    cache: &Cache,
-    record: Record,
-    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
-) -> Result<Table2Result> {
+impl Artifact for Reference {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![(
+            "reference.csv".into(),
+            reference_csv(&self.0).into_bytes(),
+        )])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        let path = entry.path("reference.csv").display().to_string();
+        Ok(Reference(reference_from_csv(
+            &text(entry, "reference.csv")?,
+            &path,
+        )?))
+    }
+}
+
+/// One seed's transfers per setting, as `transfers.csv`.
+struct Transfers(Vec<(Setting, Vec<Transferred>)>);
+
+impl Artifact for Transfers {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![(
+            "transfers.csv".into(),
+            transfers_csv(&self.0).into_bytes(),
+        )])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        let path = entry.path("transfers.csv").display().to_string();
+        Ok(Transfers(transfers_from_csv(
+            &text(entry, "transfers.csv")?,
+            &path,
+        )?))
+    }
+}
+
+/// The cohorts' unit: the face assets (`face=...\ndata=...\n`), `cohort.*`,
+/// `observer.source` and the face settings.
+pub fn cohort_unit(spec: &Spec, assets: &str) -> Unit {
+    let values = run::values_text(
+        spec,
+        &[
+            "cohort.",
+            "observer.source",
+            "dataset.subdivisions",
+            "dataset.tolerance",
+            "dataset.shear_modulus_fraction",
+        ],
+    );
+    Unit::new("cohort", COHORT_VERSION, &format!("{assets}{values}"), &[])
+}
+
+/// One seed's transfer: `table2.*`, the cohorts, the seed's unified network, the dataset (its
+/// AU range) and the basis.
+pub fn transfer_unit(
+    spec: &Spec,
+    cohort_key: &str,
+    train_key: &str,
+    dataset_key: &str,
+    basis_key: Option<&str>,
+) -> Unit {
+    let mut inputs = vec![cohort_key, train_key, dataset_key];
+    inputs.extend(basis_key);
+    Unit::new(
+        "transfer",
+        TRANSFER_VERSION,
+        &run::values_text(spec, &["table2."]),
+        &inputs,
+    )
+}
+
+/// The renders of the first seed's transfers.
+pub fn renders_unit(first_transfer_key: &str) -> Unit {
+    Unit::new("renders", RENDERS_VERSION, "", &[first_transfer_key])
+}
+
+pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
     let spec = inp.spec;
-    let values = |prefixes: &[&str]| crate::experiments::run::values_text(spec, prefixes);
     let params = SolveParams {
         tolerance: spec.dataset.tolerance,
         ..SolveParams::default()
     };
 
     // Cohort: the reference frames.
-    let cohort_key = cache::key(
-        "cohort",
-        COHORT_VERSION,
-        &format!(
-            "{}{}",
-            inp.assets,
-            values(&[
-                "cohort.",
-                "observer.source",
-                "dataset.subdivisions",
-                "dataset.tolerance",
-                "dataset.shear_modulus_fraction"
-            ])
-        ),
-        &[],
-    );
+    let cohort = cohort_unit(spec, &inp.assets);
+    let cohort_key = cohort.key.clone();
     let reader = FaceReader::new(spec.observer_source)?;
-    let t = Instant::now();
-    let reference_frames = match cache.get("cohort", &cohort_key)? {
-        Some(e) => {
-            let text = String::from_utf8(e.read("reference.csv")?)?;
-            let r = reference_from_csv(&text, &e.path("reference.csv").display().to_string())?;
-            record("cohort", &cohort_key, true, t);
-            r
-        }
-        None => {
-            let kinds = CohortKind::ALL;
-            let progress = bar(clip_count(&spec.cohort, &kinds) as u64, "cohort");
-            let tick = || progress.inc(1);
-            let r = reference(
-                &inp.source.mesh()?,
-                inp.source.params(),
-                &inp.source.weights()?,
-                inp.calibration,
-                &reader,
-                &spec.cohort,
-                &kinds,
-                &params,
-                &tick,
-            )?;
-            progress.finish_and_clear();
-            cache.put(
-                "cohort",
-                &cohort_key,
-                &[("reference.csv".into(), reference_csv(&r).into_bytes())],
-            )?;
-            record("cohort", &cohort_key, false, t);
-            r
-        }
-    };
+    let Reference(reference_frames) = stages.get_or_compute(&cohort, |stages| {
+        let kinds = CohortKind::ALL;
+        let progress = stages.bar(clip_count(&spec.cohort, &kinds) as u64, "cohort");
+        let tick = || progress.inc(1);
+        let r = reference(
+            &inp.source.mesh()?,
+            inp.source.params(),
+            &inp.source.weights()?,
+            inp.calibration,
+            &reader,
+            &spec.cohort,
+            &kinds,
+            &params,
+            &tick,
+        )?;
+        progress.finish_and_clear();
+        Ok(Reference(r))
+    })?;
 
     let observer = reader.observer(inp.model, inp.calibration.clone())?;
     let training: Vec<[f64; AU_COUNT]> = inp.samples.iter().map(|s| s.aus).collect();
@@ -143,68 +184,52 @@ pub fn run(
     let mut first = None;
     let mut first_key = String::new();
     for (seed, train_key, mlp) in &inp.unified {
-        let mut inputs = vec![cohort_key.as_str(), train_key.as_str(), inp.dataset_key];
-        inputs.extend(inp.basis_key);
-        let key = cache::key("transfer", TRANSFER_VERSION, &values(&["table2."]), &inputs);
-        let t = Instant::now();
-        let transfers = match cache.get("transfer", &key)? {
-            Some(e) => {
-                let text = String::from_utf8(e.read("transfers.csv")?)?;
-                let r = transfers_from_csv(&text, &e.path("transfers.csv").display().to_string())?;
-                record("transfer", &key, true, t);
-                r
-            }
-            None => {
-                let progress = bar(2 * clips.len() as u64, &format!("transfer {seed}"));
-                let tick = || progress.inc(1);
-                let mut out = Vec::new();
-                for setting in Setting::ALL {
-                    let mut frames: Vec<Transferred> = Vec::with_capacity(reference_frames.len());
-                    for kind in CohortKind::ALL {
-                        let mine: Vec<&std::ops::Range<usize>> = clips
-                            .iter()
-                            .filter(|r| reference_frames[r.start].cohort == kind)
-                            .collect();
-                        let aus: Vec<Vec<[f64; AU_COUNT]>> = mine
-                            .iter()
-                            .map(|r| {
-                                reference_frames[(*r).clone()]
-                                    .iter()
-                                    .map(|f| f.aus)
-                                    .collect()
-                            })
-                            .collect();
-                        let all: Vec<[f64; AU_COUNT]> = aus.iter().flatten().copied().collect();
-                        let map = (setting == Setting::Normalized)
-                            .then(|| range_map(spec.table2_normalization, &all, &target));
-                        let t = transfer(
-                            inp.model,
-                            inp.basis,
-                            &reader,
-                            &observer,
-                            mlp,
-                            map.as_ref(),
-                            &aus,
-                            &params,
-                            &tick,
-                        )
-                        .with_context(|| {
-                            format!("Table 2, seed {seed}: {} {}", kind.name(), setting.name())
-                        })?;
-                        frames.extend(t.into_iter().flatten());
-                    }
-                    out.push((setting, frames));
+        let unit = transfer_unit(spec, &cohort_key, train_key, inp.dataset_key, inp.basis_key);
+        let key = unit.key.clone();
+        let Transfers(transfers) = stages.get_or_compute(&unit, |stages| {
+            let progress = stages.bar(2 * clips.len() as u64, &format!("transfer {seed}"));
+            let tick = || progress.inc(1);
+            let mut out = Vec::new();
+            for setting in Setting::ALL {
+                let mut frames: Vec<Transferred> = Vec::with_capacity(reference_frames.len());
+                for kind in CohortKind::ALL {
+                    let mine: Vec<&std::ops::Range<usize>> = clips
+                        .iter()
+                        .filter(|r| reference_frames[r.start].cohort == kind)
+                        .collect();
+                    let aus: Vec<Vec<[f64; AU_COUNT]>> = mine
+                        .iter()
+                        .map(|r| {
+                            reference_frames[(*r).clone()]
+                                .iter()
+                                .map(|f| f.aus)
+                                .collect()
+                        })
+                        .collect();
+                    let all: Vec<[f64; AU_COUNT]> = aus.iter().flatten().copied().collect();
+                    let map = (setting == Setting::Normalized)
+                        .then(|| range_map(spec.table2_normalization, &all, &target));
+                    let t = transfer(
+                        inp.model,
+                        inp.basis,
+                        &reader,
+                        &observer,
+                        mlp,
+                        map.as_ref(),
+                        &aus,
+                        &params,
+                        &tick,
+                    )
+                    .with_context(|| {
+                        format!("Table 2, seed {seed}: {} {}", kind.name(), setting.name())
+                    })?;
+                    frames.extend(t.into_iter().flatten());
                 }
-                progress.finish_and_clear();
-                cache.put(
-                    "transfer",
-                    &key,
-                    &[("transfers.csv".into(), transfers_csv(&out).into_bytes())],
-                )?;
-                record("transfer", &key, false, t);
-                out
+                out.push((setting, frames));
             }
-        };
+            progress.finish_and_clear();
+            Ok(Transfers(out))
+        })?;
         for (setting, frames) in &transfers {
             for kind in CohortKind::ALL {
                 let idx: Vec<usize> = (0..reference_frames.len())
@@ -228,29 +253,9 @@ pub fn run(
     let first = first.context("Table 2 needs at least one seed")?;
 
     // Renders of the first seed.
-    let key = cache::key("renders", RENDERS_VERSION, "", &[&first_key]);
-    let t = Instant::now();
-    let names = [
-        "transfer_grid.png",
-        "onset_videos.gif",
-        "talking_videos.gif",
-    ];
-    let renders = match cache.get("renders", &key)? {
-        Some(e) => {
-            let r = names
-                .iter()
-                .map(|n| Ok((n.to_string(), e.read(n)?)))
-                .collect::<Result<Vec<_>>>()?;
-            record("renders", &key, true, t);
-            r
-        }
-        None => {
-            let r = renders(inp, &reference_frames, &first, &params)?;
-            cache.put("renders", &key, &r)?;
-            record("renders", &key, false, t);
-            r
-        }
-    };
+    let Files(renders) = stages.get_or_compute(&renders_unit(&first_key), |_| {
+        Ok(Files(renders(inp, &reference_frames, &first, &params)?))
+    })?;
     Ok(Table2Result {
         cohort_key,
         rows,

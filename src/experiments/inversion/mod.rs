@@ -26,8 +26,10 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 
-use super::table2::{predict_activations, range_map, training_range, RefFrame};
+use crate::cache::Entry;
 use crate::cohort::{CohortKind, CohortParams, Subject};
+use crate::experiments::stage::{text, Artifact, Stages, Unit};
+use crate::experiments::table2::{predict_activations, range_map, training_range, RefFrame};
 use crate::invert::{accelerated, au_fit, Bound, BoxQp, InversionParams, Solution};
 use crate::learn::{Mlp, Normalization};
 use crate::observe::au::AU_MAX;
@@ -41,9 +43,13 @@ use crate::sim::{
     solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, Workspace,
 };
 
-use super::observe::model_observer;
+use crate::experiments::observe::model_observer;
 
 /// The methods, in table order.
+mod report;
+
+pub use report::{csv, markdown, timing_csv, timing_markdown};
+
 pub const METHODS: [&str; 6] = [
     "network",
     "network_normalized",
@@ -470,129 +476,6 @@ pub fn summarize(frames: &[InvertedFrame], reference: &[RefFrame]) -> Vec<Summar
     out
 }
 
-/// The deterministic part:
-/// `cohort,method,frames,au_mse,landmark_rms_iod,iterations,stop_measure,converged_share,input_au_noise`
-/// (the last three empty for the network).
-pub fn csv(rows: &[Summary]) -> String {
-    let mut out = String::from(
-        "cohort,method,frames,au_mse,landmark_rms_iod,iterations,stop_measure,converged_share,input_au_noise\n",
-    );
-    for r in rows {
-        let (measure, share) = r.stop.map_or((String::new(), String::new()), |(m, c)| {
-            (format!("{m:.3e}"), format!("{c:.3}"))
-        });
-        out.push_str(&format!(
-            "{},{},{},{:.6e},{:.6e},{:.2},{measure},{share},{:.4}\n",
-            r.cohort.name(),
-            r.method,
-            r.frames,
-            r.au_mse,
-            r.landmark_rms,
-            r.iterations,
-            r.input_noise
-        ));
-    }
-    out
-}
-
-/// Timings (vary from run to run): `cohort,method,ms_per_frame,ms_per_frame_with_solve`.
-pub fn timing_csv(rows: &[Summary]) -> String {
-    let mut out = String::from("cohort,method,ms_per_frame,ms_per_frame_with_solve\n");
-    for r in rows {
-        out.push_str(&format!(
-            "{},{},{:.4},{:.4}\n",
-            r.cohort.name(),
-            r.method,
-            r.ms,
-            r.ms_with_solve
-        ));
-    }
-    out
-}
-
-/// "1st", "2nd", "3rd", "4th", ..., "11th", "12th", "13th", "21st".
-fn ordinal(n: usize) -> String {
-    let suffix = match (n % 10, n % 100) {
-        (_, 11..=13) => "th",
-        (1, _) => "st",
-        (2, _) => "nd",
-        (3, _) => "rd",
-        _ => "th",
-    };
-    format!("{n}{suffix}")
-}
-
-pub fn markdown(rows: &[Summary], p: &InversionParams, seed: u64) -> String {
-    let mut out = String::from("# Inversion: network vs optimization (Choe et al. 2001)\n\n");
-    let noise: Vec<String> = CohortKind::ALL
-        .iter()
-        .filter_map(|&k| rows.iter().find(|r| r.cohort == k))
-        .map(|r| format!("{} {:.3}", r.cohort.name().replace('_', " "), r.input_noise))
-        .collect();
-    out.push_str(&format!(
-        "Table 2's cohorts (every image, every {} video frame), network of seed {seed}. Every \
-         method reads one detection of each frame: the subject's 68 landmarks with Gaussian \
-         noise of {} IOD on every coordinate; the landmark methods take its displacements, the \
-         network and the AU fits the observer's reading of it (RMS AU noise this makes, over \
-         the frames and AUs: {}). Each method's activations drive the base model (nonlinear \
-         solve from the basis prediction), scored against the clean face: AU MSE is over 17 \
-         AUs of (clean reading - transferred) / 5, landmark RMS the distance of the solved \
-         face's 68 landmarks from the subject's without noise (IOD units, head motion \
-         removed). `landmarks_pg` holds the activations in the box by projection; \
-         `landmarks_penalty` is Choe et al.'s eq. 10 as published, the linear penalty c D(a) \
-         with c = {}, both solved by accelerated proximal gradient to a proximal-gradient norm \
-         of 1e-6 relative to |M^T d| (at most 20,000 iterations). Stop: that norm for the \
-         landmark fits, the last step's largest activation change for the AU fits (test \
-         1e-4, at most 30 Gauss-Newton iterations each); converged: the share of frames that \
-         met the test. `aus_refined` adds {} nonlinear corrections. Time per frame is a \
-         measurement of the machine, not a result: the run folder's \
-         `timings/inversion.md`.\n\n",
-        ordinal(p.frame_stride),
-        p.landmark_noise_sd,
-        noise.join(", "),
-        p.penalty,
-        p.refinements
-    ));
-    out.push_str(
-        "| cohort | method | frames | AU MSE | landmark RMS (IOD) | iterations | stop | converged |\n|---|---|---|---|---|---|---|---|\n",
-    );
-    for r in rows {
-        let (measure, share) = r.stop.map_or(("".to_string(), "".to_string()), |(m, c)| {
-            (format!("{m:.1e}"), format!("{:.0}%", 100.0 * c))
-        });
-        out.push_str(&format!(
-            "| {} | {} | {} | {:.4} | {:.4} | {:.1} | {measure} | {share} |\n",
-            r.cohort.name().replace('_', " "),
-            r.method,
-            r.frames,
-            r.au_mse,
-            r.landmark_rms,
-            r.iterations,
-        ));
-    }
-    out
-}
-
-/// The time each method took (varies from run to run and machine to machine, so it is kept
-/// apart from the results, in the run folder's `timings/`).
-pub fn timing_markdown(rows: &[Summary]) -> String {
-    let mut out = String::from(
-        "# Inversion: time per frame\n\nOne worker; the method alone, then with the nonlinear \
-         solve that scores it (release build).\n\n| cohort | method | ms / frame | ms / frame \
-         with solve |\n|---|---|---|---|\n",
-    );
-    for r in rows {
-        out.push_str(&format!(
-            "| {} | {} | {:.3} | {:.1} |\n",
-            r.cohort.name().replace('_', " "),
-            r.method,
-            r.ms,
-            r.ms_with_solve
-        ));
-    }
-    out
-}
-
 /// What the inversion stage leaves: the table's CSV and Markdown, and the timings' CSV and
 /// Markdown.
 pub struct Output {
@@ -602,21 +485,51 @@ pub struct Output {
     pub timing_markdown: String,
 }
 
+impl Artifact for Output {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![
+            ("inversion.csv".into(), self.csv.clone().into_bytes()),
+            (
+                "inversion_timing.csv".into(),
+                self.timing.clone().into_bytes(),
+            ),
+            ("inversion.md".into(), self.markdown.clone().into_bytes()),
+            (
+                "inversion_timing.md".into(),
+                self.timing_markdown.clone().into_bytes(),
+            ),
+        ])
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        Ok(Output {
+            csv: text(entry, "inversion.csv")?,
+            timing: text(entry, "inversion_timing.csv")?,
+            markdown: text(entry, "inversion.md")?,
+            timing_markdown: text(entry, "inversion_timing.md")?,
+        })
+    }
+}
+
 // 3: the expressive face (see BASIS_VERSION in run.rs). 4: one noisy detection for every
 // method, scored against the clean face; Choe's linear penalty solved to convergence.
 // 5: the caption's ordinal ("every 3rd video frame"; the markdown is cached with the stage).
 // 6: the times per frame leave the table for the run's `timings/`.
 const INVERSION_VERSION: u32 = 6;
 
+/// The inversion's unit: `inversion.*` and its inputs' keys (the cohort, the first seed's
+/// unified network, the dataset and the basis).
+pub fn unit(spec: &crate::spec::Spec, inputs: &[&str]) -> Unit {
+    let values = crate::experiments::run::values_text(spec, &["inversion."]);
+    Unit::new("inversion", INVERSION_VERSION, &values, inputs)
+}
+
 /// The cached inversion stage. Its key hashes `inversion.*` and the keys of the cohort, the
 /// first seed's unified network, the dataset (normalization range) and the basis.
 #[allow(clippy::too_many_arguments)]
 pub fn stage(
     spec: &crate::spec::Spec,
-    source: &super::face::FaceSource,
-    cache: &crate::cache::Cache,
-    record: &mut dyn FnMut(&str, &str, bool, Instant),
-    bar: &dyn Fn(u64, &str) -> indicatif::ProgressBar,
+    source: &crate::experiments::face::FaceSource,
+    stages: &mut Stages,
     inputs: &[&str],
     inverter: &Inverter,
     calibration: &Calibration,
@@ -624,89 +537,41 @@ pub fn stage(
     mlp: &Mlp,
     training_aus: &[[f64; AU_COUNT]],
 ) -> Result<Output> {
-    let values = super::run::values_text(spec, &["inversion."]);
-    let key = crate::cache::key("inversion", INVERSION_VERSION, &values, inputs);
-    let t = Instant::now();
-    let names = [
-        "inversion.csv",
-        "inversion_timing.csv",
-        "inversion.md",
-        "inversion_timing.md",
-    ];
-    if let Some(e) = cache.get("inversion", &key)? {
-        let mut text = names
-            .iter()
-            .map(|n| Ok(String::from_utf8(e.read(n)?)?))
-            .collect::<Result<Vec<_>>>()?
-            .into_iter();
-        record("inversion", &key, true, t);
-        return Ok(Output {
-            csv: text.next().expect("4"),
-            timing: text.next().expect("4"),
-            markdown: text.next().expect("4"),
-            timing_markdown: text.next().expect("4"),
-        });
-    }
-    let p = &spec.inversion;
-    let progress = bar(
-        selected(reference, p.frame_stride).len() as u64,
-        "inversion",
-    );
-    let tick = || progress.inc(1);
-    let params = SolveParams {
-        tolerance: spec.dataset.tolerance,
-        ..SolveParams::default()
-    };
-    let frames = run(
-        inverter,
-        &source.mesh()?,
-        source.params(),
-        &source.weights()?,
-        &spec.cohort,
-        calibration,
-        reference,
-        mlp,
-        training_aus,
-        p,
-        &params,
-        &tick,
-    )?;
-    progress.finish_and_clear();
-    let rows = summarize(&frames, reference);
-    let out = Output {
-        csv: csv(&rows),
-        timing: timing_csv(&rows),
-        markdown: markdown(&rows, p, spec.seeds[0]),
-        timing_markdown: timing_markdown(&rows),
-    };
-    cache.put(
-        "inversion",
-        &key,
-        &[
-            (names[0].into(), out.csv.clone().into_bytes()),
-            (names[1].into(), out.timing.clone().into_bytes()),
-            (names[2].into(), out.markdown.clone().into_bytes()),
-            (names[3].into(), out.timing_markdown.clone().into_bytes()),
-        ],
-    )?;
-    record("inversion", &key, false, t);
-    Ok(out)
+    stages.get_or_compute(&unit(spec, inputs), |stages| {
+        let p = &spec.inversion;
+        let progress = stages.bar(
+            selected(reference, p.frame_stride).len() as u64,
+            "inversion",
+        );
+        let tick = || progress.inc(1);
+        let params = SolveParams {
+            tolerance: spec.dataset.tolerance,
+            ..SolveParams::default()
+        };
+        let frames = run(
+            inverter,
+            &source.mesh()?,
+            source.params(),
+            &source.weights()?,
+            &spec.cohort,
+            calibration,
+            reference,
+            mlp,
+            training_aus,
+            p,
+            &params,
+            &tick,
+        )?;
+        progress.finish_and_clear();
+        let rows = summarize(&frames, reference);
+        Ok(Output {
+            csv: csv(&rows),
+            timing: timing_csv(&rows),
+            markdown: markdown(&rows, p, spec.seeds[0]),
+            timing_markdown: timing_markdown(&rows),
+        })
+    })
 }
 
 #[cfg(test)]
-mod tests {
-    #[test]
-    fn ordinals_read_as_english() {
-        let got: Vec<String> = [1, 2, 3, 4, 11, 12, 13, 21, 22, 23, 101, 111]
-            .iter()
-            .map(|&n| super::ordinal(n))
-            .collect();
-        assert_eq!(
-            got,
-            [
-                "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd",
-                "101st", "111th"
-            ]
-        );
-    }
-}
+mod tests;

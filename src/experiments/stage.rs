@@ -1,0 +1,324 @@
+//! The unit of work of a run (DESIGN 2.5): a stage named and keyed by what it reads, computed
+//! once and cached. Every cached stage of every experiment goes through one
+//! [`Stages::get_or_compute`]: look the unit up, decode it on a hit, else compute, store and
+//! record it. A unit is addressable by its stage name and key ([`Unit::id`]), which is what a
+//! status report lists and what a cluster launcher submits one by one.
+
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::cache::{self, Cache, Entry, Lookup};
+
+/// One unit of work: the stage (its folder in the cache) and the key of its inputs.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Unit {
+    pub stage: &'static str,
+    pub key: String,
+}
+
+impl Unit {
+    /// A unit whose key hashes the stage's name, code version, the canonical text of the
+    /// values it reads and its inputs' keys (`cache::key`).
+    pub fn new(stage: &'static str, version: u32, values: &str, inputs: &[&str]) -> Unit {
+        Unit {
+            stage,
+            key: cache::key(stage, version, values, inputs),
+        }
+    }
+
+    /// A unit under a key computed elsewhere (a stage cached under another stage's key
+    /// scheme, e.g. the dataset's noisy copy under the dataset's key).
+    pub fn keyed(stage: &'static str, key: &str) -> Unit {
+        Unit {
+            stage,
+            key: key.to_string(),
+        }
+    }
+
+    /// `stage/key-prefix`, how logs and status reports name the unit.
+    pub fn id(&self) -> String {
+        format!("{}/{}", self.stage, &self.key[..self.key.len().min(12)])
+    }
+}
+
+/// What a stage leaves in the cache: named files, and how they read back.
+pub trait Artifact: Sized {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>>;
+    fn decode(entry: &Entry) -> Result<Self>;
+}
+
+/// Files kept as they are (renders, network weights), read back in name order.
+pub struct Files(pub Vec<(String, Vec<u8>)>);
+
+impl Artifact for Files {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(self.0.clone())
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        let files = entry
+            .files
+            .keys()
+            .map(|name| Ok((name.clone(), entry.read(name)?)))
+            .collect::<Result<_>>()?;
+        Ok(Files(files))
+    }
+}
+
+/// A cache entry's file as UTF-8 text.
+pub fn text(entry: &Entry, name: &str) -> Result<String> {
+    String::from_utf8(entry.read(name)?)
+        .with_context(|| format!("{}: not UTF-8", entry.path(name).display()))
+}
+
+/// How much a run says while it works (`--quiet`, default, `--verbose`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verbosity {
+    /// Errors only.
+    Quiet,
+    /// Each computed stage's start and end; progress (bars on a terminal, a line at most
+    /// every 10 s otherwise).
+    Normal,
+    /// Also every cache hit.
+    Verbose,
+}
+
+static VERBOSITY: AtomicU8 = AtomicU8::new(1);
+
+/// Sets what runs print from now on (the command line's `--quiet` / `--verbose`).
+pub fn set_verbosity(v: Verbosity) {
+    VERBOSITY.store(v as u8, Ordering::Relaxed);
+}
+
+fn verbosity() -> Verbosity {
+    match VERBOSITY.load(Ordering::Relaxed) {
+        0 => Verbosity::Quiet,
+        1 => Verbosity::Normal,
+        _ => Verbosity::Verbose,
+    }
+}
+
+/// How often a progress line is printed when the output is not a terminal.
+const LINE_EVERY: Duration = Duration::from_secs(10);
+
+/// Progress of one stage: a bar on a terminal; on a pipe or file (CI, a cluster job) a line
+/// at most every 10 s with done/total, rate and time left, and one at the end. Shared by the
+/// worker threads (`inc` takes `&self`).
+pub struct Progress {
+    bar: Option<ProgressBar>,
+    label: String,
+    total: u64,
+    done: AtomicU64,
+    start: Instant,
+    last_line: Mutex<Instant>,
+    lines: bool,
+}
+
+impl Progress {
+    fn new(total: u64, label: &str) -> Progress {
+        let v = verbosity();
+        let terminal = std::io::stderr().is_terminal();
+        let bar = (v != Verbosity::Quiet && terminal).then(|| {
+            let b = ProgressBar::new(total);
+            b.set_style(
+                ProgressStyle::with_template(
+                    "{msg:>10} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            b.set_message(label.to_string());
+            b
+        });
+        let now = Instant::now();
+        Progress {
+            bar,
+            label: label.to_string(),
+            total,
+            done: AtomicU64::new(0),
+            start: now,
+            last_line: Mutex::new(now),
+            lines: v != Verbosity::Quiet && !terminal,
+        }
+    }
+
+    pub fn inc(&self, n: u64) {
+        let done = self.done.fetch_add(n, Ordering::Relaxed) + n;
+        if let Some(b) = &self.bar {
+            b.inc(n);
+        }
+        if !self.lines {
+            return;
+        }
+        let mut last = self.last_line.lock().unwrap_or_else(|e| e.into_inner());
+        if last.elapsed() >= LINE_EVERY && done < self.total {
+            *last = Instant::now();
+            let secs = self.start.elapsed().as_secs_f64();
+            let rate = done as f64 / secs.max(1e-9);
+            let left = (self.total - done) as f64 / rate.max(1e-9);
+            eprintln!(
+                "  {}: {done}/{} ({:.0}%), {rate:.2}/s, about {} left",
+                self.label,
+                self.total,
+                100.0 * done as f64 / self.total.max(1) as f64,
+                duration(left)
+            );
+        }
+    }
+
+    /// Steps done so far.
+    pub fn position(&self) -> u64 {
+        self.done.load(Ordering::Relaxed)
+    }
+
+    pub fn finish_and_clear(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
+/// "42 s", "3 min 20 s", "1 h 05 min".
+pub fn duration(seconds: f64) -> String {
+    let s = seconds.max(0.0).round() as u64;
+    match s {
+        0..60 => format!("{s} s"),
+        60..3600 => format!("{} min {:02} s", s / 60, s % 60),
+        _ => format!("{} h {:02} min", s / 3600, (s % 3600) / 60),
+    }
+}
+
+/// What one stage did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StageRecord {
+    pub cell: String,
+    pub stage: String,
+    pub key: String,
+    pub hit: bool,
+    pub seconds: f64,
+}
+
+/// The run context every stage works in: the cache, the records of what ran (for the
+/// manifest) and progress bars.
+pub struct Stages<'a> {
+    pub cache: &'a Cache,
+    cell: String,
+    records: &'a mut Vec<StageRecord>,
+}
+
+impl<'a> Stages<'a> {
+    pub fn new(cache: &'a Cache, cell: &str, records: &'a mut Vec<StageRecord>) -> Stages<'a> {
+        Stages {
+            cache,
+            cell: cell.to_string(),
+            records,
+        }
+    }
+
+    /// The unit's artifact: from the cache if it holds a complete entry, else `compute`d and
+    /// stored. Either way the unit is recorded with its time.
+    pub fn get_or_compute<T: Artifact>(
+        &mut self,
+        unit: &Unit,
+        compute: impl FnOnce(&mut Self) -> Result<T>,
+    ) -> Result<T> {
+        let t = Instant::now();
+        let name = self.name(unit);
+        let found = self.cache.get(unit.stage, &unit.key)?;
+        if let Lookup::Damaged { dir, reason } = &found {
+            eprintln!(
+                "{name}: the cached entry {} is damaged ({reason}); recomputing",
+                dir.display()
+            );
+        }
+        if let Lookup::Hit(entry) = found {
+            let value = T::decode(&entry)
+                .with_context(|| format!("the cached {} in {}", unit.stage, entry.dir.display()))?;
+            if verbosity() == Verbosity::Verbose {
+                eprintln!("{name}: cached");
+            }
+            self.record(unit, true, t);
+            return Ok(value);
+        }
+        if verbosity() != Verbosity::Quiet {
+            eprintln!("{name}: computing");
+        }
+        let value = compute(self)?;
+        self.cache.put(unit.stage, &unit.key, &value.encode()?)?;
+        if verbosity() != Verbosity::Quiet {
+            eprintln!("{name}: done in {}", duration(t.elapsed().as_secs_f64()));
+        }
+        self.record(unit, false, t);
+        Ok(value)
+    }
+
+    /// Records a step that is not cached (it always runs) under `unit`.
+    pub fn record(&mut self, unit: &Unit, hit: bool, since: Instant) {
+        self.records.push(StageRecord {
+            cell: self.cell.clone(),
+            stage: unit.stage.to_string(),
+            key: unit.key.clone(),
+            hit,
+            seconds: since.elapsed().as_secs_f64(),
+        });
+    }
+
+    /// Progress of `len` steps labelled `message`.
+    pub fn bar(&self, len: u64, message: &str) -> Progress {
+        Progress::new(len, message)
+    }
+
+    /// How log lines name a unit: `[cell] stage key-prefix`.
+    fn name(&self, unit: &Unit) -> String {
+        if self.cell.is_empty() {
+            unit.id()
+        } else {
+            format!("[{}] {}", self.cell, unit.id())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Number(u32);
+
+    impl Artifact for Number {
+        fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+            Ok(vec![("n.txt".into(), self.0.to_string().into_bytes())])
+        }
+        fn decode(entry: &Entry) -> Result<Self> {
+            Ok(Number(text(entry, "n.txt")?.parse()?))
+        }
+    }
+
+    #[test]
+    fn a_unit_is_computed_once_then_read_back() {
+        let dir = std::env::temp_dir().join(format!("facelab-stage-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let cache = Cache::new(&dir);
+        let mut records = Vec::new();
+        let unit = Unit::new("count", 1, "n = 7\n", &[]);
+        let mut calls = 0;
+        for _ in 0..2 {
+            let mut stages = Stages::new(&cache, "cell", &mut records);
+            let n = stages
+                .get_or_compute(&unit, |_| {
+                    calls += 1;
+                    Ok(Number(7))
+                })
+                .unwrap();
+            assert_eq!(n.0, 7);
+        }
+        assert_eq!(calls, 1);
+        let hits: Vec<bool> = records.iter().map(|r| r.hit).collect();
+        assert_eq!(hits, [false, true]);
+        assert!(unit.id().starts_with("count/") && unit.id().len() == 18);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
