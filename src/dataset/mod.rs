@@ -161,6 +161,7 @@ pub fn generate(
     params: &DatasetParams,
     seed: u64,
     jobs: &[(Expression, usize)],
+    workspaces: &WorkspacePool,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<Sample>> {
     let solve = SolveParams {
@@ -169,9 +170,9 @@ pub fn generate(
     };
     jobs.par_iter()
         .map_init(
-            || Workspace::new(model),
+            || workspaces.take(model),
             |ws, &(e, index)| -> Result<Sample> {
-                let ws = ws.as_mut().map_err(|e| e.clone())?;
+                let ws = ws.get()?;
                 let mut rng = stream(seed, &format!("dataset/{e}/{index}"));
                 let (scale, a) = draw(params.family, weights, au_controls, e, &mut rng);
                 let jaw = a.get(JAW_ROTATION);
@@ -195,6 +196,46 @@ pub fn generate(
             },
         )
         .collect()
+}
+
+/// Workspaces kept across calls of [`generate`]: a data set made in chunks analyses the
+/// model's stiffness pattern once per worker, not once per chunk and split. A workspace is
+/// scratch memory, so which one a sample gets does not change its result.
+#[derive(Default)]
+pub struct WorkspacePool(std::sync::Mutex<Vec<Workspace>>);
+
+impl WorkspacePool {
+    fn take(&self, model: &FaceModel) -> Pooled<'_> {
+        let kept = self.0.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        Pooled {
+            ws: kept.map_or_else(|| Workspace::new(model), Ok),
+            pool: self,
+        }
+    }
+}
+
+/// A workspace borrowed from a pool, returned to it when dropped.
+struct Pooled<'a> {
+    ws: Result<Workspace, crate::sim::SolveError>,
+    pool: &'a WorkspacePool,
+}
+
+impl Pooled<'_> {
+    fn get(&mut self) -> Result<&mut Workspace, crate::sim::SolveError> {
+        self.ws.as_mut().map_err(|e| e.clone())
+    }
+}
+
+impl Drop for Pooled<'_> {
+    fn drop(&mut self) {
+        let ws = std::mem::replace(
+            &mut self.ws,
+            Err(crate::sim::SolveError::Pattern("returned to the pool".into())),
+        );
+        if let Ok(ws) = ws {
+            self.pool.0.lock().unwrap_or_else(|e| e.into_inner()).push(ws);
+        }
+    }
 }
 
 /// Every sample of a data set, in its order: each expression's `pairs_per_expression`

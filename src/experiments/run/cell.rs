@@ -211,6 +211,7 @@ pub(super) fn run_cell(
             // Cached in chunks, so a killed run loses at most one chunk of solving; every
             // sample has its own stream, so the chunks join to the same bytes.
             let mut samples = Vec::with_capacity(jobs.len());
+            let workspaces = dataset::WorkspacePool::default();
             for (i, chunk) in jobs.chunks(DATASET_CHUNK).enumerate() {
                 let unit = Unit::new(
                     "dataset_chunk",
@@ -230,6 +231,7 @@ pub(super) fn run_cell(
                         &spec.dataset,
                         spec.dataset.seed,
                         chunk,
+                        &workspaces,
                         &tick,
                     )?))
                 })?;
