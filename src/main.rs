@@ -149,7 +149,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let summary = run::run(
                 &spec,
                 &run::RunOptions {
-                    results,
+                    results: results_folder(results),
                     sets,
                     threads,
                     publish,
@@ -178,6 +178,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             sets,
             results,
         } => {
+            let results = results_folder(results);
             let lines = run::status(&spec, &sets, &results)?;
             let (mut cached, mut todo) = (0, 0);
             for line in &lines {
@@ -203,7 +204,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     .map_or("-".to_string(), |u| u.key[..12].to_string());
                 println!("{state:<8} {key:<12} {}{cell}{note}", line.label);
             }
-            println!("{cached} cached, {todo} to run; status reads the cache and changes nothing");
+            println!(
+                "{cached} cached, {todo} to run in {}; status reads the cache and changes nothing",
+                results.join(".cache").display()
+            );
         }
         Command::Verify { run_dir, threads } => {
             let threads = set_threads(threads)?;
@@ -461,6 +465,19 @@ fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
         .build_global()
         .context("starting the thread pool")?;
     Ok(n)
+}
+
+/// The results folder: the default `results` means the checkout's `results/` when the working
+/// folder is inside a checkout (so a run from a subfolder writes where a run from the root
+/// does); anything else is taken as given, relative to the working folder.
+fn results_folder(given: PathBuf) -> PathBuf {
+    if given != std::path::Path::new("results") {
+        return given;
+    }
+    std::env::current_dir()
+        .ok()
+        .and_then(|d| facelab::io::find_root(&d))
+        .map_or(given, |root| root.join("results"))
 }
 
 fn main() -> ExitCode {

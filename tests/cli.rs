@@ -275,3 +275,25 @@ fn a_copied_binary_runs_the_smoke_spec_from_another_folder() {
     assert!(work.join("out/paper-tables/smoke_methods.md").is_file());
     assert!(run.join("timings/inversion.md").is_file());
 }
+
+/// From a subfolder of the checkout the default results folder is still the checkout's.
+#[test]
+fn status_from_a_subfolder_reads_the_checkouts_results() {
+    let out = Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .current_dir(crate::root().join("experiments"))
+        .args(["status", "smoke.toml"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cache = crate::root().join("results/.cache");
+    assert!(
+        stdout.contains(&format!("in {};", cache.display())),
+        "{stdout}"
+    );
+    assert!(!crate::root().join("experiments/results").exists());
+}

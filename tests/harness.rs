@@ -463,6 +463,12 @@ fn two_runs_at_once_share_a_results_folder_and_verify_reproduces_them() {
     let one = std::fs::read(results.join("smoke/run-0001/table1.csv")).unwrap();
     let two = std::fs::read(results.join("smoke/run-0002/table1.csv")).unwrap();
     assert_eq!(one, two);
+    // The run that finished second says that it replaces the first as latest.
+    let said = [&a, &b]
+        .iter()
+        .filter(|o| String::from_utf8_lossy(&o.stderr).contains("replaces it as latest"))
+        .count();
+    assert_eq!(said, 1);
 
     let verify = facelab(&[
         "verify",

@@ -230,10 +230,16 @@ impl Drop for Pooled<'_> {
     fn drop(&mut self) {
         let ws = std::mem::replace(
             &mut self.ws,
-            Err(crate::sim::SolveError::Pattern("returned to the pool".into())),
+            Err(crate::sim::SolveError::Pattern(
+                "returned to the pool".into(),
+            )),
         );
         if let Ok(ws) = ws {
-            self.pool.0.lock().unwrap_or_else(|e| e.into_inner()).push(ws);
+            self.pool
+                .0
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(ws);
         }
     }
 }

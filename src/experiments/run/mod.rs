@@ -143,6 +143,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         out_root.join("figures"),
         out_root.join("paper-tables"),
     ]);
+    let latest_at_start = std::fs::read_link(experiment_dir.join("latest")).ok();
     let run_dir = new_run_dir(&experiment_dir)?;
     // An overridden run is not the committed record: its tables and figures stay in its run
     // folder (and say what was overridden) unless `--publish` asks otherwise.
@@ -378,6 +379,22 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         serde_json::to_string_pretty(&manifest)?.as_bytes(),
     )?;
     let run_dir = finish_run_dir(&run_dir)?;
+    // Another run of this experiment finished while this one ran: say that this one replaces
+    // it as `latest` (and its tables), rather than overwrite it silently.
+    let latest_now = std::fs::read_link(experiment_dir.join("latest")).ok();
+    if latest_now.is_some() && latest_now != latest_at_start {
+        eprintln!(
+            "{}: {} finished while this run ran; {} replaces it as latest{}",
+            experiment_dir.display(),
+            latest_now.unwrap_or_default().display(),
+            run_dir.file_name().unwrap_or_default().to_string_lossy(),
+            if opts.sets.is_empty() || opts.publish {
+                " and in the published tables and figures"
+            } else {
+                ""
+            }
+        );
+    }
     point_latest(&experiment_dir, &run_dir)?;
     Ok(RunSummary {
         dir: run_dir,
