@@ -45,9 +45,7 @@ pub fn tests_root() -> &'static std::path::Path {
                 let Some(pid) = name.strip_prefix("facelab-tests-") else {
                     continue;
                 };
-                let gone = std::path::Path::new("/proc").is_dir()
-                    && !std::path::Path::new("/proc").join(pid).exists();
-                if gone {
+                if facelab::cache::process_ended(pid) {
                     let _ = std::fs::remove_dir_all(e.path());
                 }
             }

@@ -26,6 +26,14 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CacheError + '_ {
     }
 }
 
+/// Whether process `pid` of this machine has ended, where the system can tell (`/proc`);
+/// `false` where it cannot. What a killed run left (temporary entries, unfinished run
+/// folders) is removed only once this says its owner is gone.
+pub fn process_ended(pid: impl std::fmt::Display) -> bool {
+    let proc = Path::new("/proc");
+    proc.is_dir() && !proc.join(pid.to_string()).exists()
+}
+
 /// Hex SHA-256 of bytes.
 pub fn sha256(bytes: &[u8]) -> String {
     let digest = Sha256::digest(bytes);
@@ -208,8 +216,7 @@ impl Cache {
                     .and_then(|rest| rest.split('-').next())
                     .and_then(|p| p.parse::<u32>().ok());
                 if let Some(pid) = pid {
-                    let alive = Path::new(&format!("/proc/{pid}")).exists();
-                    if !alive && pid != std::process::id() {
+                    if process_ended(pid) && pid != std::process::id() {
                         let _ = std::fs::remove_dir_all(e.path());
                     }
                 }

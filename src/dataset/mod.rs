@@ -208,33 +208,30 @@ impl WorkspacePool {
     fn take(&self, model: &FaceModel) -> Pooled<'_> {
         let kept = self.0.lock().unwrap_or_else(|e| e.into_inner()).pop();
         Pooled {
-            ws: kept.map_or_else(|| Workspace::new(model), Ok),
+            ws: Some(kept.map_or_else(|| Workspace::new(model), Ok)),
             pool: self,
         }
     }
 }
 
-/// A workspace borrowed from a pool, returned to it when dropped.
+/// A workspace borrowed from a pool, returned to it when dropped (`ws` is `Some` until then).
 struct Pooled<'a> {
-    ws: Result<Workspace, crate::sim::SolveError>,
+    ws: Option<Result<Workspace, crate::sim::SolveError>>,
     pool: &'a WorkspacePool,
 }
 
 impl Pooled<'_> {
     fn get(&mut self) -> Result<&mut Workspace, crate::sim::SolveError> {
-        self.ws.as_mut().map_err(|e| e.clone())
+        match self.ws.as_mut().expect("present until dropped") {
+            Ok(ws) => Ok(ws),
+            Err(e) => Err(e.clone()),
+        }
     }
 }
 
 impl Drop for Pooled<'_> {
     fn drop(&mut self) {
-        let ws = std::mem::replace(
-            &mut self.ws,
-            Err(crate::sim::SolveError::Pattern(
-                "returned to the pool".into(),
-            )),
-        );
-        if let Ok(ws) = ws {
+        if let Some(Ok(ws)) = self.ws.take() {
             self.pool
                 .0
                 .lock()

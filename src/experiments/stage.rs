@@ -256,8 +256,8 @@ impl<'a> Stages<'a> {
         Ok(value)
     }
 
-    /// Records a step that is not cached (it always runs) under `unit`.
-    pub fn record(&mut self, unit: &Unit, hit: bool, since: Instant) {
+    /// Records what a unit did (a cache hit or a computation) and how long it took.
+    fn record(&mut self, unit: &Unit, hit: bool, since: Instant) {
         self.records.push(StageRecord {
             cell: self.cell.clone(),
             stage: unit.stage.to_string(),

@@ -113,8 +113,7 @@ fn owner_is_gone(partial: &Path) -> bool {
     let (Some(owner_host), Some(pid)) = (words.next(), words.next()) else {
         return false;
     };
-    let proc = Path::new("/proc");
-    owner_host == host() && proc.is_dir() && !proc.join(pid).exists()
+    owner_host == host() && crate::cache::process_ended(pid)
 }
 
 /// Removes the `.partial` folders of runs that died (killed, crashed) before finishing, saying

@@ -135,14 +135,13 @@ pub(super) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
     })
 }
 
-/// One unit of a cell's plan: what it is, and its unit when the key can be known without
-/// running (the pose transfer's key hashes the voluntary network, known once it is cached).
+/// One unit of a cell's plan: what it is, and its unit, or why its key cannot be known
+/// without running (the pose transfer's key hashes the voluntary network, known once it is
+/// cached).
 pub struct Planned {
     pub cell: String,
     pub label: String,
-    pub unit: Option<Unit>,
-    /// Why the unit's key is not known yet.
-    pub waiting: Option<String>,
+    pub unit: Result<Unit, String>,
 }
 
 /// Every unit of work of a cell, in the order a run meets them, with their keys computed
@@ -151,12 +150,11 @@ pub struct Planned {
 pub(crate) fn plan(cell: &Cell, a: &Assets, cache: &Cache) -> Result<Vec<Planned>> {
     let spec = &cell.spec;
     let mut out = Vec::new();
-    let mut add = |label: String, unit: Option<Unit>, waiting: Option<String>| {
+    let mut add = |label: String, unit: Result<Unit, String>| {
         out.push(Planned {
             cell: cell.name.clone(),
             label,
             unit,
-            waiting,
         })
     };
     let tables = |t: &str| spec.tables.iter().any(|x| x == t);
@@ -164,32 +162,22 @@ pub(crate) fn plan(cell: &Cell, a: &Assets, cache: &Cache) -> Result<Vec<Planned
     if spec.tables.iter().any(|t| t != "headpose") {
         let k = keys(spec, a)?;
         if let Some(b) = &k.basis {
-            add("basis".into(), Some(Unit::keyed("basis", b)), None);
+            add("basis".into(), Ok(Unit::keyed("basis", b)));
         }
         match &k.clean_dataset {
             Some(clean) => {
-                add(
-                    "dataset (clean)".into(),
-                    Some(Unit::keyed("dataset", clean)),
-                    None,
-                );
+                add("dataset (clean)".into(), Ok(Unit::keyed("dataset", clean)));
                 add(
                     "dataset_noise".into(),
-                    Some(Unit::keyed("dataset_noise", &k.dataset)),
-                    None,
+                    Ok(Unit::keyed("dataset_noise", &k.dataset)),
                 );
             }
-            None => add(
-                "dataset".into(),
-                Some(Unit::keyed("dataset", &k.dataset)),
-                None,
-            ),
+            None => add("dataset".into(), Ok(Unit::keyed("dataset", &k.dataset))),
         }
         for ((seed, network), key) in &k.train {
             add(
                 format!("train {} seed {seed}", network.name()),
-                Some(Unit::keyed("train", key)),
-                None,
+                Ok(Unit::keyed("train", key)),
             );
         }
         let unified: Vec<(u64, &str)> = k
@@ -198,6 +186,25 @@ pub(crate) fn plan(cell: &Cell, a: &Assets, cache: &Cache) -> Result<Vec<Planned
             .filter(|((_, n), _)| *n == Network::Unified)
             .map(|((seed, _), key)| (*seed, key.as_str()))
             .collect();
+        // Real OpenFace files through every seed's unified network, labelled per seed.
+        let real = |label: &str, files: &[crate::io::realdata::RealInput]| {
+            let content = realfaces::content(files)?;
+            Ok::<_, anyhow::Error>(
+                unified
+                    .iter()
+                    .map(|(seed, train_key)| {
+                        let unit = realfaces::unit(
+                            spec,
+                            &content,
+                            train_key,
+                            &k.dataset,
+                            k.basis.as_deref(),
+                        );
+                        (format!("{label} seed {seed}"), unit)
+                    })
+                    .collect::<Vec<_>>(),
+            )
+        };
         if tables("table2") {
             let assets = format!("face={}\ndata={}\n", a.face, a.data(spec)?);
             let cohort = table2_stage::cohort_unit(spec, &assets);
@@ -211,64 +218,35 @@ pub(crate) fn plan(cell: &Cell, a: &Assets, cache: &Cache) -> Result<Vec<Planned
                     k.basis.as_deref(),
                 );
                 first.get_or_insert_with(|| t.key.clone());
-                add(format!("transfer seed {seed}"), Some(t), None);
+                add(format!("transfer seed {seed}"), Ok(t));
             }
             if let Some(first) = first {
-                add(
-                    "renders".into(),
-                    Some(table2_stage::renders_unit(&first)),
-                    None,
-                );
+                add("renders".into(), Ok(table2_stage::renders_unit(&first)));
             }
             if tables("inversion") {
                 if let Some((_, train_key)) = unified.first() {
                     let mut inputs = vec![cohort.key.as_str(), train_key, k.dataset.as_str()];
                     inputs.extend(k.basis.as_deref());
-                    add(
-                        "inversion".into(),
-                        Some(inversion::unit(spec, &inputs)),
-                        None,
-                    );
+                    add("inversion".into(), Ok(inversion::unit(spec, &inputs)));
                 }
             }
             if let Some(file) = &spec.table2_openface {
-                let content = realfaces::content(&[crate::io::realdata::committed_input(file)])?;
-                for (seed, train_key) in &unified {
-                    add(
-                        format!("realfaces {file} seed {seed}"),
-                        Some(realfaces::unit(
-                            spec,
-                            &content,
-                            train_key,
-                            &k.dataset,
-                            k.basis.as_deref(),
-                        )),
-                        None,
-                    );
+                let committed = [crate::io::realdata::committed_input(file)];
+                for (label, unit) in real(&format!("realfaces {file}"), &committed)? {
+                    add(label, Ok(unit));
                 }
             }
-            add("cohort".into(), Some(cohort.clone()), None);
-            cohort_key = Some(cohort.key);
+            cohort_key = Some(cohort.key.clone());
+            add("cohort".into(), Ok(cohort));
         }
         if tables("realfaces") {
             match crate::io::realdata::inputs(&spec.realfaces) {
                 Ok(files) => {
-                    let content = realfaces::content(&files)?;
-                    for (seed, train_key) in &unified {
-                        add(
-                            format!("realfaces seed {seed}"),
-                            Some(realfaces::unit(
-                                spec,
-                                &content,
-                                train_key,
-                                &k.dataset,
-                                k.basis.as_deref(),
-                            )),
-                            None,
-                        );
+                    for (label, unit) in real("realfaces", &files)? {
+                        add(label, Ok(unit));
                     }
                 }
-                Err(e) => add("realfaces".into(), None, Some(e.to_string())),
+                Err(e) => add("realfaces".into(), Err(e.to_string())),
             }
         }
     }
@@ -279,21 +257,15 @@ pub(crate) fn plan(cell: &Cell, a: &Assets, cache: &Cache) -> Result<Vec<Planned
             Lookup::Hit(e) => Some(e.read("weights.safetensors")?),
             _ => None,
         };
-        add("headpose_data".into(), Some(data), None);
-        add("headpose_train".into(), Some(train), None);
+        add("headpose_data".into(), Ok(data));
+        add("headpose_train".into(), Ok(train));
         if let Some(cohort_key) = &cohort_key {
-            match weights {
-                Some(w) => add(
-                    "pose_transfer".into(),
-                    Some(pose_transfer::unit(spec, cohort_key, &w)),
-                    None,
-                ),
-                None => add(
-                    "pose_transfer".into(),
-                    None,
-                    Some("its key needs the voluntary network (headpose_train)".into()),
-                ),
-            }
+            add(
+                "pose_transfer".into(),
+                weights
+                    .map(|w| pose_transfer::unit(spec, cohort_key, &w))
+                    .ok_or_else(|| "its key needs the voluntary network (headpose_train)".into()),
+            );
         }
     }
     Ok(out)

@@ -431,18 +431,18 @@ pub fn status(spec_path: &Path, sets: &[String], results: &Path) -> Result<Vec<S
     let mut out = Vec::new();
     for cell in &cells {
         for p in plan(cell, &a, &cache)? {
-            let state = match (&p.unit, p.waiting) {
-                (Some(u), _) => match cache.inspect(u.stage, &u.key) {
+            let state = match &p.unit {
+                Ok(u) => match cache.inspect(u.stage, &u.key) {
                     crate::cache::Lookup::Hit(_) => UnitState::Cached,
                     crate::cache::Lookup::Missing => UnitState::Missing,
                     crate::cache::Lookup::Damaged { reason, .. } => UnitState::Damaged(reason),
                 },
-                (None, why) => UnitState::Waiting(why.unwrap_or_default()),
+                Err(why) => UnitState::Waiting(why.clone()),
             };
             out.push(StatusLine {
                 cell: p.cell,
                 label: p.label,
-                unit: p.unit,
+                unit: p.unit.ok(),
                 state,
             });
         }
