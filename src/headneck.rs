@@ -30,7 +30,7 @@ pub const OUTPUTS: usize = 3 * MUSCLES;
 /// Training targets are drawn in this multiple of the evaluated range.
 const TARGET_MARGIN: f64 = 1.15;
 /// `[headpose]` in a spec.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct HeadposeParams {
     /// The data's and the network's streams. Default 1.
     pub seed: u64,

@@ -363,7 +363,7 @@ pub fn au_fit(
 }
 
 /// `[inversion]` of a spec.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct InversionParams {
     /// Every this many video frames is inverted (images: all). Default 3.
     pub frame_stride: usize,

@@ -170,7 +170,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 if !cell.name.is_empty() {
                     println!("# cell {}", cell.name);
                 }
-                print!("{}", facelab::spec::to_toml(&cell.spec.values));
+                print!("{}", cell.spec.to_toml());
             }
         }
         Command::Status {

@@ -147,25 +147,21 @@ fn spec_errors_name_file_line_column_and_key() {
     );
 }
 
-/// Keys added later are recorded (in cache keys and a run's `spec.toml`) only where a spec sets
-/// them, so the committed runs of the paper's specs keep their keys.
+/// Keys added later are recorded in a run's `spec.toml` only where a spec sets them, so the
+/// committed runs' recorded specs read as they were written.
 #[test]
 fn later_keys_change_nothing_for_specs_that_do_not_set_them() {
     for name in ["paper", "table1", "smoke"] {
         let cells = spec::load(&root().join(format!("experiments/{name}.toml")), &[]).unwrap();
-        let keys: Vec<&String> = cells[0].spec.values.keys().collect();
         for later in ["dataset.family", "realfaces."] {
-            assert!(
-                !keys.iter().any(|k| k.starts_with(later)),
-                "{name}.toml records {later}"
-            );
+            assert!(!cells[0].spec.records(later), "{name}.toml records {later}");
         }
     }
     // The smoke spec sets none of the later keys; the paper's specs read every face with the
     // readout fitted to OpenFace, and Table 2 adds the committed real file.
     let smoke = &spec::load(&root().join("experiments/smoke.toml"), &[]).unwrap()[0].spec;
-    assert!(!smoke.values.contains_key("observer.calibration"));
-    assert!(!smoke.values.contains_key("table2.openface"));
+    assert!(!smoke.records("observer.calibration"));
+    assert!(!smoke.records("table2.openface"));
     assert_eq!(smoke.table2_openface, None);
     let paper = &spec::load(&root().join("experiments/paper.toml"), &[]).unwrap()[0].spec;
     assert_eq!(paper.calibration, "experiments/au_observer_fit.csv");
@@ -177,7 +173,7 @@ fn later_keys_change_nothing_for_specs_that_do_not_set_them() {
     let s = &cells[0].spec;
     assert_eq!(s.dataset.family, facelab::dataset::Family::Broad);
     assert_eq!(s.calibration, "experiments/au_observer_fit.csv");
-    assert!(s.values.contains_key("realfaces.frame_stride"));
+    assert!(s.records("realfaces.frame_stride"));
     let sweep = spec::load(&root().join("experiments/ablations/family.toml"), &[]).unwrap();
     let names: Vec<&str> = sweep.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(
@@ -530,6 +526,16 @@ fn manifest_names_the_commit_and_a_clean_checkout_whatever_the_run_writes_into_i
     };
     let (m, text) = manifest();
     assert_eq!(m["git_revision"], head.as_str(), "{text}");
+    // The code's provenance is the binary's own, recorded when it was built from this
+    // repository, not the checkout it runs in.
+    let built = Command::new("git")
+        .args(["rev-parse", "HEAD"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    let built = String::from_utf8_lossy(&built.stdout).trim().to_string();
+    assert_eq!(m["build"]["revision"], built.as_str(), "{text}");
+    assert_ne!(m["build"]["revision"], head.as_str(), "{text}");
     assert_eq!(m["git_dirty"], false, "{text}");
     // Nor do an earlier run's outputs make the next run's checkout look modified; anything
     // else does.

@@ -123,11 +123,9 @@ fn malformed_specs_and_overrides_are_errors_not_panics() {
         .collect();
     specs.sort();
     // The paper spec fully resolved (every key written out), as a run records it.
-    let resolved = facelab::spec::to_toml(
-        &facelab::spec::load(&dir.join("paper.toml"), &[]).unwrap()[0]
-            .spec
-            .values,
-    );
+    let resolved = facelab::spec::load(&dir.join("paper.toml"), &[]).unwrap()[0]
+        .spec
+        .to_toml();
     let mut inputs: Vec<(String, Vec<u8>)> = specs
         .iter()
         .map(|p| (p.display().to_string(), std::fs::read(p).unwrap()))

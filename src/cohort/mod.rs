@@ -21,7 +21,7 @@ use crate::sim::{Activations, FaceModel, FaceParams, ModelError};
 /// How subjects differ from the base model. Geometry in metres (the base face is about 15 cm
 /// wide); strengths and stiffness as log-normal factors around 1; defaults and their sources
 /// in `experiments/base.toml` (`[cohort.subjects]`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct SubjectParams {
     /// SD of the relative face width change. Default 0.04: bizygomatic breadth varies by
     /// about 4-5% (coefficient of variation) among adults of one sex (Farkas 1994).
@@ -270,7 +270,7 @@ impl Subject {
 
 /// What a cohort's clips are like. Field defaults and their reasons are in
 /// `experiments/base.toml` (`[cohort.images]`, `[cohort.onset_videos]`, `[cohort.talking_videos]`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct ClipParams {
     pub subjects: usize,
     /// Frames per clip (1 for images).
@@ -331,7 +331,7 @@ impl CohortKind {
 
 /// The cohorts of Table 2: their seed, the detector noise on reference AUs, how subjects
 /// differ, and each cohort's clips. Defaults in `experiments/base.toml` with their reasons.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct CohortParams {
     /// Seed of the subjects and clips (one population for every training seed). Default 1.
     pub seed: u64,

@@ -7,7 +7,8 @@
 //! - `broad`: what real faces do besides posing one expression (see [`Family::Broad`]).
 
 /// Where each sample's solve starts.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum SolveStart {
     /// The linear basis' prediction of the equilibrium (one Newton solve; falls back to
     /// `Rest` if it fails).
@@ -36,7 +37,8 @@ impl SolveStart {
 }
 
 /// How a sample's activations are drawn (`dataset.family`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Family {
     /// Zeng et al.'s `w_e * s` plus the jaw.
     Paper,
@@ -77,7 +79,7 @@ impl Family {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct DatasetParams {
     /// Pairs per expression. Default 1000 (paper 4.2).
     pub pairs_per_expression: usize,

@@ -20,7 +20,8 @@ use crate::sim::geom::{Rot3, V3};
 use crate::sim::{FaceModel, State};
 
 /// Where the observer's landmarks come from (`observer.source`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Source {
     /// The model's landmark vertices.
     #[default]

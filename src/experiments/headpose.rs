@@ -28,25 +28,6 @@ use crate::sim::FaceModel;
 /// Bump when the data, training or evaluation change meaning. 5: the teacher's projected
 /// gradient restarts its momentum on the proximal-gradient test and always takes its step.
 const HEADPOSE_VERSION: u32 = 5;
-/// The spec keys the data stage reads (its targets, poses and split).
-const DATA_KEYS: [&str; 7] = [
-    "headpose.seed",
-    "headpose.fit_targets",
-    "headpose.poses_per_target",
-    "headpose.test_fraction",
-    "headpose.pitch_degrees",
-    "headpose.yaw_degrees",
-    "headpose.roll_degrees",
-];
-/// The spec keys the training stage reads (besides its data).
-const TRAIN_KEYS: [&str; 6] = [
-    "headpose.seed",
-    "headpose.layers",
-    "headpose.width",
-    "headpose.learning_rate",
-    "headpose.batch_size",
-    "headpose.epochs",
-];
 /// Strains are scaled by this in the network's outputs so that they weigh like activations.
 /// Samples per second in the trajectories.
 const SAMPLE_RATE: f64 = 100.0;
@@ -172,16 +153,46 @@ pub struct Output {
     runs: Vec<(&'static str, String, Trajectory)>,
 }
 
-/// The teacher's training pairs: only the keys the data reads, so retraining never re-fits.
+/// What the teacher's training pairs depend on: its targets, poses and split.
+#[derive(serde::Serialize)]
+struct DataInputs {
+    seed: u64,
+    fit_targets: usize,
+    poses_per_target: usize,
+    test_fraction: f64,
+    range_degrees: [f64; 3],
+}
+
+/// What the voluntary network depends on besides its data.
+#[derive(serde::Serialize)]
+struct TrainInputs<'a> {
+    seed: u64,
+    model: &'a crate::learn::params::ModelParams,
+    train: &'a crate::learn::params::TrainParams,
+}
+
+/// The teacher's training pairs: only what the data reads, so retraining never re-fits.
 pub fn data_unit(spec: &crate::spec::Spec) -> Unit {
-    let values = super::run::values_text(spec, &DATA_KEYS);
-    Unit::new("headpose_data", HEADPOSE_VERSION, &values, &[])
+    let h = &spec.headpose;
+    let inputs = DataInputs {
+        seed: h.seed,
+        fit_targets: h.fit_targets,
+        poses_per_target: h.poses_per_target,
+        test_fraction: h.test_fraction,
+        range_degrees: h.range_degrees,
+    };
+    Unit::new("headpose_data", HEADPOSE_VERSION, &inputs, &[])
 }
 
 /// The voluntary network, trained on the data of `data_key`.
 pub fn train_unit(spec: &crate::spec::Spec, data_key: &str) -> Unit {
-    let values = super::run::values_text(spec, &TRAIN_KEYS);
-    Unit::new("headpose_train", HEADPOSE_VERSION, &values, &[data_key])
+    let h = &spec.headpose;
+    let inputs = TrainInputs {
+        seed: h.seed,
+        model: &h.model,
+        train: &h.train,
+    };
+    Unit::new("headpose_train", HEADPOSE_VERSION, &inputs, &[data_key])
 }
 
 /// Dataset and training (cached), then the evaluation.

@@ -209,12 +209,11 @@ impl Artifact for Errors {
 
 /// The stage's unit: `headpose.*`, the cohorts' key and the controller's bytes.
 pub fn unit(spec: &crate::spec::Spec, cohort_key: &str, voluntary: &[u8]) -> Unit {
-    let values = super::run::values_text(spec, &["headpose."]);
     let controller = crate::cache::sha256(voluntary);
     Unit::new(
         "pose_transfer",
         POSE_TRANSFER_VERSION,
-        &values,
+        &spec.headpose,
         &[cohort_key, &controller],
     )
 }

@@ -131,10 +131,10 @@ pub fn unit(
     Unit::new(
         "realfaces",
         REALFACES_VERSION,
-        &format!(
-            "{content}realfaces.frame_stride = {}\ntable2.normalization = {}\n",
+        &(
+            content,
             spec.realfaces.frame_stride,
-            spec.table2_normalization.name()
+            spec.table2_normalization,
         ),
         &deps,
     )

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
 
 use crate::cache::{self, Cache, Entry, Lookup};
 
@@ -22,12 +23,20 @@ pub struct Unit {
 }
 
 impl Unit {
-    /// A unit whose key hashes the stage's name, code version, the canonical text of the
-    /// values it reads and its inputs' keys (`cache::key`).
-    pub fn new(stage: &'static str, version: u32, values: &str, inputs: &[&str]) -> Unit {
+    /// A unit whose key hashes the stage's name, code version, the typed values it reads
+    /// (serialized canonically: fields in declaration order) and its inputs' keys
+    /// (`cache::key`).
+    pub fn new<T: Serialize + ?Sized>(
+        stage: &'static str,
+        version: u32,
+        values: &T,
+        inputs: &[&str],
+    ) -> Unit {
+        // Plain structs of numbers, strings and enums: serializing them cannot fail.
+        let text = serde_json::to_string(values).expect("stage inputs serialize");
         Unit {
             stage,
-            key: cache::key(stage, version, values, inputs),
+            key: cache::key(stage, version, &text, inputs),
         }
     }
 

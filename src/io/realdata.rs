@@ -16,7 +16,7 @@ pub enum RealDataError {
 }
 
 /// `[realfaces]` in a spec.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct RealfacesParams {
     /// The list of files (`file,person,licence`), relative to the repository.
     pub files: String,

@@ -2,7 +2,8 @@
 //! resolve to.
 
 /// Per-AU input normalization, fitted on the training inputs and stored with the model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Normalization {
     None,
     MinMax,
@@ -31,7 +32,7 @@ impl Normalization {
 }
 
 /// The MLP's hidden layers (paper 4.1: 4 x 100, ReLU; footnote 1 chose it by test MSE).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct ModelParams {
     /// Hidden layers. Default 4.
     pub layers: usize,
@@ -49,7 +50,7 @@ impl Default for ModelParams {
 }
 
 /// Training (paper 4.3): Adam, MSE loss.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct TrainParams {
     /// Adam step size. Default 0.01.
     pub learning_rate: f64,

@@ -101,7 +101,7 @@ impl FittedReadout {
 /// Detector error stand-in (DESIGN 2.2): each AU's gain is scaled by a per-subject factor
 /// `1 + gain_spread * N(0, 1)` (kept positive) and Gaussian noise of `noise_sd` (AU units) is
 /// added to every reading, before clamping. Off when both are 0.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct ObserverNoise {
     pub noise_sd: f64,
     pub gain_spread: f64,

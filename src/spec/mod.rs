@@ -49,8 +49,8 @@ pub fn load(path: &Path, sets: &[String]) -> Result<Vec<Cell>, SpecError> {
     resolve::cells(tree, path)
 }
 
-/// The resolved values of a cell as TOML text (what a run writes as `spec.toml`).
-pub fn to_toml(values: &BTreeMap<String, toml::Value>) -> String {
+/// The resolved values of a cell as TOML text (`Spec::to_toml`).
+fn to_toml(values: &BTreeMap<String, toml::Value>) -> String {
     let mut root = toml::Table::new();
     for (key, value) in values {
         let parts: Vec<&str> = key.split('.').collect();

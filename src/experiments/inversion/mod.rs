@@ -519,8 +519,7 @@ const INVERSION_VERSION: u32 = 6;
 /// The inversion's unit: `inversion.*` and its inputs' keys (the cohort, the first seed's
 /// unified network, the dataset and the basis).
 pub fn unit(spec: &crate::spec::Spec, inputs: &[&str]) -> Unit {
-    let values = crate::experiments::run::values_text(spec, &["inversion."]);
-    Unit::new("inversion", INVERSION_VERSION, &values, inputs)
+    Unit::new("inversion", INVERSION_VERSION, &spec.inversion, inputs)
 }
 
 /// The cached inversion stage. Its key hashes `inversion.*` and the keys of the cohort, the

@@ -216,7 +216,7 @@ pub(super) fn run_cell(
                 let unit = Unit::new(
                     "dataset_chunk",
                     DATASET_VERSION,
-                    &format!("chunk = {i}\nsize = {DATASET_CHUNK}\n"),
+                    &(i, DATASET_CHUNK),
                     &[clean_key],
                 );
                 let before = progress.position();
@@ -302,7 +302,8 @@ pub(super) fn run_cell(
         let inputs = table2_stage::Inputs {
             spec,
             source: &source,
-            assets: format!("face={}\ndata={}\n", a.face, a.data(spec)?),
+            face: a.face.clone(),
+            data: a.data(spec)?,
             dataset_key: &k.dataset,
             basis_key: k.basis.as_deref(),
             unified,

@@ -2,7 +2,8 @@
 //! a cell's basis, dataset and training stages.
 
 use crate::cache::{self, Cache, Lookup};
-use crate::dataset::SolveStart;
+use crate::dataset::reader::Source;
+use crate::dataset::{DatasetParams, Family, SolveStart};
 use crate::experiments::stage::Unit;
 use crate::experiments::table1::Network;
 use crate::experiments::{headpose, inversion, pose_transfer, realfaces, table2_stage};
@@ -10,17 +11,60 @@ use crate::io::expressions::default_expressions_path;
 use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
 use crate::io::mesh::default_mesh_path;
 use crate::io::observer_fit::read_any_calibration;
+use crate::learn::params::{ModelParams, TrainParams};
 use crate::observe::Calibration;
+use crate::observe::ObserverNoise;
 use crate::spec::Cell;
 use crate::spec::Spec;
 use anyhow::{Context, Result};
+use serde::Serialize;
 use std::path::Path;
 
 use super::*;
 
-/// Values under the given dotted prefixes, as canonical `key = value` lines.
-pub(crate) fn values_text(spec: &Spec, prefixes: &[&str]) -> String {
-    spec.values_text(prefixes, &[], &[])
+/// The face settings every solve reads: the basis, the dataset and the cohorts hash them.
+#[derive(Serialize)]
+pub(crate) struct FaceSettings {
+    subdivisions: u8,
+    tolerance: f64,
+    shear_modulus_fraction: f64,
+}
+
+impl FaceSettings {
+    pub(crate) fn of(d: &DatasetParams) -> FaceSettings {
+        FaceSettings {
+            subdivisions: d.subdivisions,
+            tolerance: d.tolerance,
+            shear_modulus_fraction: d.shear_modulus_fraction,
+        }
+    }
+}
+
+/// What the dataset's faces depend on. Not `dataset.test_fraction`: it splits the pairs at
+/// training (the train key has it), not the faces.
+#[derive(Serialize)]
+struct DatasetInputs<'a> {
+    face: &'a str,
+    data: &'a str,
+    settings: FaceSettings,
+    pairs_per_expression: usize,
+    start: SolveStart,
+    family: Family,
+    seed: u64,
+    observer: ObserverNoise,
+    calibration: &'a str,
+    source: Source,
+}
+
+/// What one network's training depends on (besides the dataset's key).
+#[derive(Serialize)]
+struct TrainInputs<'a> {
+    facs: &'a str,
+    seed: u64,
+    network: String,
+    model: &'a ModelParams,
+    train: &'a TrainParams,
+    test_fraction: f64,
 }
 
 pub(super) fn file_hash(path: &Path) -> Result<String> {
@@ -79,52 +123,48 @@ pub(super) struct Keys {
 }
 
 pub(super) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
-    let face = format!("face={}\n", a.face);
     let needs_basis =
         spec.dataset.start == SolveStart::Predicted || spec.tables.iter().any(|t| t == "inversion");
     let basis = needs_basis.then(|| {
-        let v = format!(
-            "{face}dataset.subdivisions = {}\ndataset.tolerance = {}\n\
-             dataset.shear_modulus_fraction = {}\n",
-            spec.dataset.subdivisions, spec.dataset.tolerance, spec.dataset.shear_modulus_fraction
-        );
-        cache::key("basis", BASIS_VERSION, &v, &[])
+        let face = (a.face.as_str(), FaceSettings::of(&spec.dataset));
+        Unit::new("basis", BASIS_VERSION, &face, &[]).key
     });
     // The faces are read without detector noise and cached under the key of the spec with
     // the noise off; a noisy data set is cached under its own key, made from the clean one
     // (`dataset::add_noise`), so a noise sweep solves the faces once.
     let data = a.data(spec)?;
-    // `dataset.test_fraction` splits the pairs at training (its key), not the faces.
-    let dataset_key = |zeroed: &[&str]| {
-        let text = spec.values_text(
-            &["dataset.", "observer."],
-            &["dataset.test_fraction"],
-            zeroed,
-        );
-        cache::key(
-            "dataset",
-            DATASET_VERSION,
-            &format!("{face}data={data}\n{text}"),
-            &basis.iter().map(String::as_str).collect::<Vec<_>>(),
-        )
+    let dataset_key = |observer: ObserverNoise| {
+        let d = &spec.dataset;
+        let inputs = DatasetInputs {
+            face: &a.face,
+            data: &data,
+            settings: FaceSettings::of(d),
+            pairs_per_expression: d.pairs_per_expression,
+            start: d.start,
+            family: d.family,
+            seed: d.seed,
+            observer,
+            calibration: &spec.calibration,
+            source: spec.observer_source,
+        };
+        let basis: Vec<&str> = basis.iter().map(String::as_str).collect();
+        Unit::new("dataset", DATASET_VERSION, &inputs, &basis).key
     };
-    let dataset = dataset_key(&[]);
-    let clean_dataset = (!spec.observer.is_off())
-        .then(|| dataset_key(&["observer.noise_sd", "observer.gain_spread"]));
+    let dataset = dataset_key(spec.observer);
+    let clean_dataset = (!spec.observer.is_off()).then(|| dataset_key(ObserverNoise::default()));
     let mut train = Vec::new();
     for &seed in &spec.seeds {
         for network in Network::all() {
-            let v = format!(
-                "facs={}\nseed={seed}\nnetwork={}\n{}{}",
-                a.facs_hash,
-                network.name(),
-                values_text(spec, &["model.", "train."]),
-                values_text(spec, &["dataset.test_fraction"]),
-            );
-            train.push((
-                (seed, network),
-                cache::key("train", TRAIN_VERSION, &v, &[&dataset]),
-            ));
+            let inputs = TrainInputs {
+                facs: &a.facs_hash,
+                seed,
+                network: network.name(),
+                model: &spec.model,
+                train: &spec.train,
+                test_fraction: spec.dataset.test_fraction,
+            };
+            let unit = Unit::new("train", TRAIN_VERSION, &inputs, &[&dataset]);
+            train.push(((seed, network), unit.key));
         }
     }
     Ok(Keys {
@@ -206,8 +246,7 @@ pub(crate) fn plan(cell: &Cell, a: &Assets, cache: &Cache) -> Result<Vec<Planned
             )
         };
         if tables("table2") {
-            let assets = format!("face={}\ndata={}\n", a.face, a.data(spec)?);
-            let cohort = table2_stage::cohort_unit(spec, &assets);
+            let cohort = table2_stage::cohort_unit(spec, &a.face, &a.data(spec)?);
             let mut first = None;
             for (seed, train_key) in &unified {
                 let t = table2_stage::transfer_unit(

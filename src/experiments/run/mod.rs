@@ -37,7 +37,7 @@ mod keys;
 mod table1_report;
 
 pub(crate) use cell::curves_csv;
-pub(crate) use keys::{spec_calibration, values_text};
+pub(crate) use keys::{spec_calibration, FaceSettings};
 use {cell::*, folders::*, keys::*, table1_report::*};
 
 /// Code versions: bump when a stage's output for the same inputs changes.
@@ -180,7 +180,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         };
         write(
             format!("{prefix}spec.toml"),
-            spec::to_toml(&cell.spec.values).into_bytes(),
+            cell.spec.to_toml().into_bytes(),
             &mut outputs,
         )?;
         let mut voluntary = None;
@@ -362,6 +362,12 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     }
     let manifest = serde_json::json!({
         "facelab_version": env!("CARGO_PKG_VERSION"),
+        // The code: the commit the binary was built from (`build.rs`), wherever it runs.
+        "build": {
+            "revision": env!("FACELAB_BUILD_REVISION"),
+            "dirty": env!("FACELAB_BUILD_DIRTY"),
+        },
+        // The specs and data: the checkout the run was started in ("unknown" outside one).
         "git_revision": git_revision,
         "git_dirty": git_dirty,
         "spec": spec_path.display().to_string(),

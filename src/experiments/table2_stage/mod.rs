@@ -44,8 +44,10 @@ const RENDERS_VERSION: u32 = 3;
 pub struct Inputs<'a> {
     pub spec: &'a Spec,
     pub source: &'a FaceSource,
-    /// `face=...\ndata=...\n` (asset hashes).
-    pub assets: String,
+    /// The face mesh's hash.
+    pub face: String,
+    /// The expression weights' and observer calibration's hashes (`Assets::data`).
+    pub data: String,
     pub dataset_key: &'a str,
     pub basis_key: Option<&'a str>,
     /// Per seed: the unified network's train key and network.
@@ -104,20 +106,34 @@ impl Artifact for Transfers {
     }
 }
 
-/// The cohorts' unit: the face assets (`face=...\ndata=...\n`), `cohort.*`,
+/// What the cohorts depend on.
+#[derive(serde::Serialize)]
+struct CohortInputs<'a> {
+    face: &'a str,
+    data: &'a str,
+    cohort: &'a crate::cohort::CohortParams,
+    source: crate::dataset::reader::Source,
+    settings: run::FaceSettings,
+}
+
+/// The cohorts' unit: the face mesh's and the data files' hashes, `cohort.*`,
 /// `observer.source` and the face settings.
-pub fn cohort_unit(spec: &Spec, assets: &str) -> Unit {
-    let values = run::values_text(
-        spec,
-        &[
-            "cohort.",
-            "observer.source",
-            "dataset.subdivisions",
-            "dataset.tolerance",
-            "dataset.shear_modulus_fraction",
-        ],
-    );
-    Unit::new("cohort", COHORT_VERSION, &format!("{assets}{values}"), &[])
+pub fn cohort_unit(spec: &Spec, face: &str, data: &str) -> Unit {
+    let inputs = CohortInputs {
+        face,
+        data,
+        cohort: &spec.cohort,
+        source: spec.observer_source,
+        settings: run::FaceSettings::of(&spec.dataset),
+    };
+    Unit::new("cohort", COHORT_VERSION, &inputs, &[])
+}
+
+/// What a transfer reads of the spec besides its inputs' keys: `table2.*`.
+#[derive(serde::Serialize)]
+struct TransferInputs<'a> {
+    normalization: crate::learn::params::Normalization,
+    openface: Option<&'a str>,
 }
 
 /// One seed's transfer: `table2.*`, the cohorts, the seed's unified network, the dataset (its
@@ -134,14 +150,17 @@ pub fn transfer_unit(
     Unit::new(
         "transfer",
         TRANSFER_VERSION,
-        &run::values_text(spec, &["table2."]),
+        &TransferInputs {
+            normalization: spec.table2_normalization,
+            openface: spec.table2_openface.as_deref(),
+        },
         &inputs,
     )
 }
 
 /// The renders of the first seed's transfers.
 pub fn renders_unit(first_transfer_key: &str) -> Unit {
-    Unit::new("renders", RENDERS_VERSION, "", &[first_transfer_key])
+    Unit::new("renders", RENDERS_VERSION, &(), &[first_transfer_key])
 }
 
 pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
@@ -152,7 +171,7 @@ pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
     };
 
     // Cohort: the reference frames.
-    let cohort = cohort_unit(spec, &inp.assets);
+    let cohort = cohort_unit(spec, &inp.face, &inp.data);
     let cohort_key = cohort.key.clone();
     let reader = FaceReader::new(spec.observer_source)?;
     let Reference(reference_frames) = stages.get_or_compute(&cohort, |stages| {

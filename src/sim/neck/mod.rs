@@ -47,7 +47,7 @@ pub enum NeckError {
 
 /// Reflex gains (paper 3.1): feedback activation `k_e (e - e*) + k_v (e_dot - e_dot*)` per
 /// muscle, e the strain.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ReflexParams {
     /// Activation per unit strain error. Default 20.
     pub strain_gain: f64,

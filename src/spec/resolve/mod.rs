@@ -65,8 +65,9 @@ pub struct Spec {
     /// Prefix of the paper-table and figure names (`report.prefix`), so a smoke or test run
     /// does not overwrite the committed `paper-tables/table1.md`. Default "".
     pub report_prefix: String,
-    /// Every value read, with defaults filled in, by dotted key.
-    pub values: BTreeMap<String, toml::Value>,
+    /// Every value read, with defaults filled in, by dotted key: what `to_toml` writes.
+    /// Nothing past the spec layer reads it; stages read the typed fields.
+    pub(in crate::spec) values: BTreeMap<String, toml::Value>,
 }
 
 /// One point of a sweep grid (the only one when there is no `[sweep]`).
@@ -104,19 +105,18 @@ impl Spec {
         self.calibration == crate::io::observer_fit::DEFAULT_READOUT
     }
 
-    /// The values under the given dotted prefixes as canonical `key = value` lines, the text
-    /// a stage's cache key hashes: `except` keys left out, `zeroed` keys read as 0.
-    pub fn values_text(&self, prefixes: &[&str], except: &[&str], zeroed: &[&str]) -> String {
-        let mut values = self.values.clone();
-        for k in zeroed {
-            values.insert(k.to_string(), toml::Value::Float(0.0));
-        }
-        values
-            .iter()
-            .filter(|(k, _)| prefixes.iter().any(|p| k.starts_with(p)))
-            .filter(|(k, _)| !except.contains(&k.as_str()))
-            .map(|(k, v)| format!("{k} = {v}\n"))
-            .collect()
+    /// The resolved spec as TOML text, every key a file or `--set` wrote and every default
+    /// read (what a run records as its cell's `spec.toml`, and `verify` reruns).
+    pub fn to_toml(&self) -> String {
+        super::to_toml(&self.values)
+    }
+
+    /// Whether the resolved spec records `key` (a dotted key, or a section's prefix ending
+    /// in `.`).
+    pub fn records(&self, key: &str) -> bool {
+        self.values
+            .keys()
+            .any(|k| k == key || (key.ends_with('.') && k.starts_with(key)))
     }
 }
 
