@@ -430,6 +430,76 @@ fn a_killed_run_resumes_and_finishes_with_the_same_outputs() {
     }
 }
 
+/// Table 2's cohorts and transfers are cached in parts (per cohort; per setting and cohort): a
+/// run killed after two transfer parts finished reuses them when resumed, and its tables equal
+/// an uninterrupted run's.
+#[test]
+fn a_run_killed_in_the_transfer_resumes_from_its_parts() {
+    let clean = temp("transfer-clean");
+    let killed = temp("transfer-killed");
+    let ok = run_smoke(&clean.join("results"), &[]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+
+    let results = killed.join("results");
+    let log = killed.join("stderr.txt");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(["run", "experiments/smoke.toml", "--results"])
+        .arg(&results)
+        .current_dir(root())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let parts_done = |text: &str| {
+        text.lines()
+            .filter(|l| l.starts_with("transfer_part/") && l.contains(": done in"))
+            .count()
+    };
+    let start = std::time::Instant::now();
+    while parts_done(&std::fs::read_to_string(&log).unwrap()) < 2 {
+        assert!(child.try_wait().unwrap().is_none(), "the run ended first");
+        assert!(start.elapsed().as_secs() < 600, "no transfer part finished");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+
+    let resumed = run_smoke(&results, &[]);
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let text = std::fs::read_to_string(results.join("smoke/latest/manifest.json")).unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let hits = |stage: &str| {
+        manifest["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["stage"] == stage && r["hit"] == true)
+            .count()
+    };
+    assert!(hits("transfer_part") >= 2, "{text}");
+    // The cohorts finished before the kill: cached whole, their parts not looked up.
+    assert_eq!(hits("cohort"), 1, "{text}");
+    assert_same_bytes(
+        &clean.join("results/smoke/latest"),
+        &results.join("smoke/latest"),
+        &[
+            "table2.csv",
+            "reference.csv",
+            "table2_frames.csv",
+            "inversion.csv",
+        ],
+        "killed in the transfer and resumed",
+    );
+}
+
 #[test]
 fn two_runs_at_once_share_a_results_folder_and_verify_reproduces_them() {
     let dir = temp("concurrent");
@@ -477,6 +547,70 @@ fn two_runs_at_once_share_a_results_folder_and_verify_reproduces_them() {
         String::from_utf8_lossy(&verify.stderr)
     );
     assert!(stdout.contains("reproduced byte for byte"), "{stdout}");
+}
+
+/// A run publishes its tables, figures and `latest` under the results folder's lock: while a
+/// live process holds it the run waits (saying so) and publishes nothing; a lock left by a
+/// process that has ended is taken over.
+#[test]
+fn a_run_waits_for_the_publish_lock_and_takes_over_a_dead_one() {
+    let dir = temp("publish-lock");
+    let results = dir.join("results");
+    std::fs::create_dir_all(&results).unwrap();
+    let lock = results.join(".publish.lock");
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap();
+    let host = host.trim();
+    // This test's own process: alive for as long as the run waits.
+    std::fs::write(&lock, format!("{host} {}\n", std::process::id())).unwrap();
+    let log = dir.join("stderr.txt");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_facelab"))
+        .args(["run", &smoke(), "--results", &results.display().to_string()])
+        .args(["--set", "tables=[\"table1\"]", "--publish"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let waiting = "is publishing its tables; waiting for it";
+    let start = std::time::Instant::now();
+    while !std::fs::read_to_string(&log).unwrap().contains(waiting) {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended without waiting"
+        );
+        assert!(
+            start.elapsed().as_secs() < 600,
+            "the run never reached the lock"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+    let tables = dir.join("paper-tables");
+    assert!(!tables.join("smoke_table1.md").exists());
+    assert!(!results.join("smoke/latest").exists());
+    std::fs::remove_file(&lock).unwrap();
+    assert!(child.wait().unwrap().success());
+    assert!(tables.join("smoke_table1.md").exists());
+    assert!(results.join("smoke/latest/table1.csv").exists());
+    assert!(!lock.exists(), "the run left its lock");
+    assert!(!results.join("smoke/latest/.publish").exists());
+
+    // A lock whose process has ended (a run killed while publishing) is taken over.
+    std::fs::write(&lock, format!("{host} 4194303999\n")).unwrap();
+    let out = facelab(&[
+        "run",
+        &smoke(),
+        "--results",
+        &results.display().to_string(),
+        "--set",
+        "tables=[\"table1\"]",
+        "--publish",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("stopped while publishing; taking it over"),
+        "{stderr}"
+    );
+    assert!(!lock.exists());
 }
 
 #[test]

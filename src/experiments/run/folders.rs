@@ -87,6 +87,65 @@ pub(super) fn new_run_dir(experiment_dir: &Path) -> Result<PathBuf> {
     }
 }
 
+/// Held while a run publishes into a results folder (`<results>/.publish.lock`, naming its
+/// owner as `host pid`); removed when dropped. A lock whose owner has ended (a killed run) is
+/// taken over.
+pub(super) struct PublishLock {
+    path: PathBuf,
+}
+
+impl PublishLock {
+    /// Takes the lock, waiting (and saying so once) while a live run holds it.
+    pub(super) fn acquire(results: &Path) -> Result<PublishLock> {
+        let path = results.join(".publish.lock");
+        let mut said = false;
+        loop {
+            match std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&path)
+            {
+                Ok(mut file) => {
+                    use std::io::Write as _;
+                    writeln!(file, "{} {}", host(), std::process::id())
+                        .with_context(|| format!("{}: cannot write", path.display()))?;
+                    return Ok(PublishLock { path });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let owner = std::fs::read_to_string(&path).unwrap_or_default();
+                    if owner_ended(&owner) {
+                        eprintln!(
+                            "{}: its run ({}) stopped while publishing; taking it over",
+                            path.display(),
+                            owner.trim()
+                        );
+                        let _ = std::fs::remove_file(&path);
+                        continue;
+                    }
+                    if !said {
+                        eprintln!(
+                            "{}: another run ({}) is publishing its tables; waiting for it",
+                            path.display(),
+                            owner.trim()
+                        );
+                        said = true;
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(100));
+                }
+                Err(e) => {
+                    return Err(e).with_context(|| format!("{}: cannot create", path.display()))
+                }
+            }
+        }
+    }
+}
+
+impl Drop for PublishLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
 /// Suffix of a run folder whose run has not finished.
 pub(super) const PARTIAL: &str = ".partial";
 
@@ -109,6 +168,12 @@ fn owner_is_gone(partial: &Path) -> bool {
             .and_then(|m| m.modified())
             .is_ok_and(|t| t.elapsed().is_ok_and(|age| age.as_secs() > 24 * 3600));
     };
+    owner_ended(&owner)
+}
+
+/// Whether the process an owner line (`host pid`) names has ended: only a process of this
+/// machine is judged.
+fn owner_ended(owner: &str) -> bool {
     let mut words = owner.split_whitespace();
     let (Some(owner_host), Some(pid)) = (words.next(), words.next()) else {
         return false;
@@ -176,9 +241,71 @@ pub(super) struct Publish {
     pub(super) figures: PathBuf,
     /// The run's `--set` values (none for the committed record).
     pub(super) overrides: Vec<String>,
+    /// For a published run: `tables` and `figures` are a staging folder, copied to these at the
+    /// end (`copy_out`).
+    pub(super) staged: Option<Staged>,
+}
+
+/// A published run's staging folder and where its two subfolders are copied.
+pub(super) struct Staged {
+    pub(super) staging: PathBuf,
+    pub(super) tables: PathBuf,
+    pub(super) figures: PathBuf,
+}
+
+/// The folder in a run's folder where a published run stages its tables and figures.
+pub(super) const STAGING: &str = ".publish";
+
+/// Files under `dir`, relative to it, in name order.
+fn files_under(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    let mut todo = vec![PathBuf::new()];
+    while let Some(rel) = todo.pop() {
+        let path = dir.join(&rel);
+        if !path.exists() {
+            continue;
+        }
+        for e in
+            std::fs::read_dir(&path).with_context(|| format!("{}: cannot list", path.display()))?
+        {
+            let e = e.with_context(|| format!("{}: cannot list", path.display()))?;
+            let child = rel.join(e.file_name());
+            if e.file_type()
+                .with_context(|| format!("{}: cannot read", e.path().display()))?
+                .is_dir()
+            {
+                todo.push(child);
+            } else {
+                out.push(child);
+            }
+        }
+    }
+    out.sort();
+    Ok(out)
 }
 
 impl Publish {
+    /// Copies a published run's staged tables and figures to their folders (each file
+    /// atomically) and removes the staging folder. Call under the `PublishLock`.
+    pub(super) fn copy_out(&self) -> Result<()> {
+        let Some(s) = &self.staged else {
+            return Ok(());
+        };
+        for (from, to) in [(&self.tables, &s.tables), (&self.figures, &s.figures)] {
+            for rel in files_under(from)? {
+                let src = from.join(&rel);
+                let bytes = std::fs::read(&src)
+                    .with_context(|| format!("{}: cannot read", src.display()))?;
+                write_atomic(&to.join(&rel), &bytes)?;
+            }
+        }
+        if s.staging.exists() {
+            std::fs::remove_dir_all(&s.staging)
+                .with_context(|| format!("{}: cannot remove", s.staging.display()))?;
+        }
+        Ok(())
+    }
+
     /// Writes the table `name` (Markdown or LaTeX) into the tables folder; an overridden run's
     /// table says so under its title (Markdown) or in a first comment line (LaTeX).
     pub(super) fn table(&self, name: &str, text: &str) -> Result<()> {

@@ -147,18 +147,28 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     let run_dir = new_run_dir(&experiment_dir)?;
     // An overridden run is not the committed record: its tables and figures stay in its run
     // folder (and say what was overridden) unless `--publish` asks otherwise.
-    let publish = Publish {
-        tables: if opts.sets.is_empty() || opts.publish {
-            out_root.join("paper-tables")
-        } else {
-            run_dir.join("paper-tables")
-        },
-        figures: if opts.sets.is_empty() || opts.publish {
-            out_root.join("figures")
-        } else {
-            run_dir.join("figures")
-        },
-        overrides: opts.sets.clone(),
+    // A published run's tables and figures are staged in its folder and copied out at the end,
+    // under the results folder's publish lock, together with `latest`.
+    let publishes = opts.sets.is_empty() || opts.publish;
+    let publish = if publishes {
+        let staging = run_dir.join(STAGING);
+        Publish {
+            tables: staging.join("paper-tables"),
+            figures: staging.join("figures"),
+            overrides: opts.sets.clone(),
+            staged: Some(Staged {
+                staging,
+                tables: out_root.join("paper-tables"),
+                figures: out_root.join("figures"),
+            }),
+        }
+    } else {
+        Publish {
+            tables: run_dir.join("paper-tables"),
+            figures: run_dir.join("figures"),
+            overrides: opts.sets.clone(),
+            staged: None,
+        }
     };
     let mut records = Vec::new();
     let mut outputs: BTreeMap<String, String> = BTreeMap::new();
@@ -384,6 +394,10 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         &run_dir.join("manifest.json"),
         serde_json::to_string_pretty(&manifest)?.as_bytes(),
     )?;
+    // One run at a time publishes into a results folder: its tables, figures and `latest`
+    // change together, and a run that finishes while another publishes waits, saying so.
+    let _lock = PublishLock::acquire(&opts.results)?;
+    publish.copy_out()?;
     let run_dir = finish_run_dir(&run_dir)?;
     // Another run of this experiment finished while this one ran: say that this one replaces
     // it as `latest` (and its tables), rather than overwrite it silently.
@@ -394,7 +408,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             experiment_dir.display(),
             latest_now.unwrap_or_default().display(),
             run_dir.file_name().unwrap_or_default().to_string_lossy(),
-            if opts.sets.is_empty() || opts.publish {
+            if publishes {
                 " and in the published tables and figures"
             } else {
                 ""

@@ -178,19 +178,32 @@ pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
         let kinds = CohortKind::ALL;
         let progress = stages.bar(clip_count(&spec.cohort, &kinds) as u64, "cohort");
         let tick = || progress.inc(1);
-        let r = reference(
-            &inp.source.mesh()?,
-            inp.source.params(),
-            &inp.source.weights()?,
-            inp.calibration,
-            &reader,
-            &spec.cohort,
-            &kinds,
-            &params,
-            &tick,
-        )?;
+        // Cached per cohort, so a killed run loses at most one cohort's solving; every
+        // subject has its own stream, so the parts join to the same bytes.
+        let mut frames = Vec::new();
+        for kind in kinds {
+            let unit = Unit::new("cohort_part", COHORT_VERSION, kind.name(), &[&cohort_key]);
+            let before = progress.position();
+            let Reference(part) = stages.get_or_compute(&unit, |_| {
+                Ok(Reference(reference(
+                    &inp.source.mesh()?,
+                    inp.source.params(),
+                    &inp.source.weights()?,
+                    inp.calibration,
+                    &reader,
+                    &spec.cohort,
+                    &[kind],
+                    &params,
+                    &tick,
+                )?))
+            })?;
+            // A cached part did not tick.
+            let count = clip_count(&spec.cohort, &[kind]) as u64;
+            progress.inc(count.saturating_sub(progress.position() - before));
+            frames.extend(part);
+        }
         progress.finish_and_clear();
-        Ok(Reference(r))
+        Ok(Reference(frames))
     })?;
 
     let observer = reader.observer(inp.model, inp.calibration.clone())?;
@@ -212,37 +225,58 @@ pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
             for setting in Setting::ALL {
                 let mut frames: Vec<Transferred> = Vec::with_capacity(reference_frames.len());
                 for kind in CohortKind::ALL {
-                    let mine: Vec<&std::ops::Range<usize>> = clips
+                    // Cached per setting and cohort, so a killed run loses at most one part;
+                    // each clip is transferred on its own, so the parts join to the same bytes.
+                    let part = Unit::new(
+                        "transfer_part",
+                        TRANSFER_VERSION,
+                        &(setting.name(), kind.name()),
+                        &[&key],
+                    );
+                    let count = clips
                         .iter()
                         .filter(|r| reference_frames[r.start].cohort == kind)
-                        .collect();
-                    let aus: Vec<Vec<[f64; AU_COUNT]>> = mine
-                        .iter()
-                        .map(|r| {
-                            reference_frames[(*r).clone()]
-                                .iter()
-                                .map(|f| f.aus)
-                                .collect()
-                        })
-                        .collect();
-                    let all: Vec<[f64; AU_COUNT]> = aus.iter().flatten().copied().collect();
-                    let map = (setting == Setting::Normalized)
-                        .then(|| range_map(spec.table2_normalization, &all, &target));
-                    let t = transfer(
-                        inp.model,
-                        inp.basis,
-                        &reader,
-                        &observer,
-                        mlp,
-                        map.as_ref(),
-                        &aus,
-                        &params,
-                        &tick,
-                    )
-                    .with_context(|| {
-                        format!("Table 2, seed {seed}: {} {}", kind.name(), setting.name())
+                        .count() as u64;
+                    let before = progress.position();
+                    let Transfers(done) = stages.get_or_compute(&part, |_| {
+                        let mine: Vec<&std::ops::Range<usize>> = clips
+                            .iter()
+                            .filter(|r| reference_frames[r.start].cohort == kind)
+                            .collect();
+                        let aus: Vec<Vec<[f64; AU_COUNT]>> = mine
+                            .iter()
+                            .map(|r| {
+                                reference_frames[(*r).clone()]
+                                    .iter()
+                                    .map(|f| f.aus)
+                                    .collect()
+                            })
+                            .collect();
+                        let all: Vec<[f64; AU_COUNT]> = aus.iter().flatten().copied().collect();
+                        let map = (setting == Setting::Normalized)
+                            .then(|| range_map(spec.table2_normalization, &all, &target));
+                        let t = transfer(
+                            inp.model,
+                            inp.basis,
+                            &reader,
+                            &observer,
+                            mlp,
+                            map.as_ref(),
+                            &aus,
+                            &params,
+                            &tick,
+                        )
+                        .with_context(|| {
+                            format!("Table 2, seed {seed}: {} {}", kind.name(), setting.name())
+                        })?;
+                        Ok(Transfers(vec![(
+                            setting,
+                            t.into_iter().flatten().collect(),
+                        )]))
                     })?;
-                    frames.extend(t.into_iter().flatten());
+                    // A cached part did not tick.
+                    progress.inc(count.saturating_sub(progress.position() - before));
+                    frames.extend(done.into_iter().flat_map(|(_, f)| f));
                 }
                 out.push((setting, frames));
             }
