@@ -298,7 +298,10 @@ pub struct ClipParams {
 }
 
 /// The three cohorts.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
 pub enum CohortKind {
     Images,
     OnsetVideos,

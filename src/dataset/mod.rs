@@ -116,18 +116,18 @@ impl Default for DatasetParams {
     }
 }
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 pub mod reader;
 
-use crate::observe::{Observer, ObserverNoise, AU_COUNT, AU_NAMES};
+use crate::io::rows::{self, num, CsvRow};
+use crate::observe::{Observer, ObserverNoise, AU_COUNT};
 use crate::rng::stream;
 use crate::rng::Stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::controls::{
-    control_index, control_names, muscle_index, CONTROL_COUNT, JAW_ROTATION, JAW_SLIDE, JAW_TWIST,
-    MUSCLE_COUNT,
+    control_index, muscle_index, CONTROL_COUNT, JAW_ROTATION, JAW_SLIDE, JAW_TWIST, MUSCLE_COUNT,
 };
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::muscles::{Side, MUSCLE_PAIRS};
@@ -136,15 +136,26 @@ use crate::sim::{solve_from_rest, Activations, FaceModel, SolveParams, Workspace
 use reader::FaceReader;
 
 /// One training pair.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sample {
     pub expression: Expression,
     /// Index within its expression.
     pub index: usize,
     /// The expression scale s.
+    #[serde(serialize_with = "num::shortest")]
     pub scale: f64,
+    #[serde(with = "num::all")]
     pub aus: [f64; AU_COUNT],
+    #[serde(with = "num::all")]
     pub activations: [f64; CONTROL_COUNT],
+}
+
+/// `expression,index,scale,AU01..AU45,<56 control names>`; numbers in Rust's shortest
+/// round-trip form, so reading gives back the same bits.
+impl CsvRow for Sample {
+    fn header() -> Vec<String> {
+        rows::wide(&["expression", "index", "scale"])
+    }
 }
 
 /// Generates `params.pairs_per_expression` pairs per expression, read without detector noise
@@ -415,66 +426,12 @@ pub fn broad_sample(
     )
 }
 
-/// `expression,index,scale,AU01..AU45,<56 control names>`; numbers in Rust's shortest
-/// round-trip form, so reading gives back the same bits.
 pub fn to_csv(samples: &[Sample]) -> String {
-    let mut out = String::from("expression,index,scale");
-    for a in AU_NAMES {
-        out.push(',');
-        out.push_str(a);
-    }
-    for c in control_names() {
-        out.push(',');
-        out.push_str(c);
-    }
-    out.push('\n');
-    for s in samples {
-        out.push_str(&format!("{},{},{}", s.expression, s.index, s.scale));
-        for v in s.aus.iter().chain(&s.activations) {
-            out.push_str(&format!(",{v}"));
-        }
-        out.push('\n');
-    }
-    out
+    rows::to_csv(samples)
 }
 
 pub fn from_csv(text: &str, name: &str) -> Result<Vec<Sample>> {
-    let mut lines = text.lines();
-    let header = lines.next().unwrap_or_default();
-    let expected = 3 + AU_COUNT + CONTROL_COUNT;
-    if header.split(',').count() != expected {
-        bail!(
-            "{name}: header has {} columns, expected {expected}",
-            header.split(',').count()
-        );
-    }
-    lines
-        .enumerate()
-        .map(|(i, line)| {
-            let cells: Vec<&str> = line.split(',').collect();
-            if cells.len() != expected {
-                bail!(
-                    "{name}:{}: {} cells, expected {expected}",
-                    i + 2,
-                    cells.len()
-                );
-            }
-            let num = |k: usize| -> Result<f64> {
-                cells[k]
-                    .parse()
-                    .with_context(|| format!("{name}:{}: `{}` is not a number", i + 2, cells[k]))
-            };
-            Ok(Sample {
-                expression: cells[0]
-                    .parse()
-                    .map_err(|e| anyhow::anyhow!("{name}:{}: {e}", i + 2))?,
-                index: num(1)? as usize,
-                scale: num(2)?,
-                aus: std::array::from_fn(|k| num(3 + k).unwrap_or(f64::NAN)),
-                activations: std::array::from_fn(|k| num(3 + AU_COUNT + k).unwrap_or(f64::NAN)),
-            })
-        })
-        .collect()
+    Ok(rows::from_csv(text, name)?)
 }
 
 #[cfg(test)]

@@ -14,10 +14,10 @@ use crate::cohort::{clips, Clip, CohortKind, CohortParams, Subject};
 use crate::learn::{Mlp, Normalization, Normalizer, Pairs};
 use crate::observe::au::AU_MAX;
 use crate::observe::HeadPose;
-use crate::observe::{Calibration, Observer, ObserverNoise, AU_COUNT, AU_NAMES};
+use crate::observe::{Calibration, Observer, ObserverNoise, AU_COUNT};
 use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
-use crate::sim::controls::{control_names, CONTROL_COUNT, JAW_SLIDE, JAW_TWIST};
+use crate::sim::controls::{CONTROL_COUNT, JAW_SLIDE, JAW_TWIST};
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::solver::solve_predicted;
 use crate::sim::{
@@ -25,6 +25,7 @@ use crate::sim::{
 };
 
 use crate::dataset::reader::FaceReader;
+use crate::io::rows::{self, num, CsvRow};
 
 /// The paper's 8 AUs of Table 2 (indices into `AU_NAMES`).
 pub const PAPER_AUS: [&str; 8] = [
@@ -56,7 +57,10 @@ pub const PAPER: [(&str, [f64; 8], f64); 4] = [
 ];
 
 /// Whether reference AUs are mapped onto the training range before the network.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
 pub enum Setting {
     Unnormalized,
     Normalized,
@@ -78,18 +82,74 @@ impl Setting {
 }
 
 /// One reference image or video frame.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefFrame {
     pub cohort: CohortKind,
     pub subject: usize,
     /// `None`: a neutral image.
+    #[serde(with = "neutral")]
     pub expression: Option<Expression>,
     pub frame: usize,
     /// Observed head pose (OpenFace pose_Rx, Ry, Rz; rad).
+    #[serde(with = "num::all")]
     pub pose: [f64; 3],
+    #[serde(with = "num::all")]
     pub aus: [f64; AU_COUNT],
     /// The subject's activations (its own muscles).
+    #[serde(with = "num::all")]
     pub activations: [f64; CONTROL_COUNT],
+}
+
+/// `cohort,subject,expression,frame,pose_Rx,pose_Ry,pose_Rz,AU01..AU45,<56 controls>`;
+/// numbers in Rust's shortest round-trip form.
+impl CsvRow for RefFrame {
+    fn header() -> Vec<String> {
+        rows::wide(&[
+            "cohort",
+            "subject",
+            "expression",
+            "frame",
+            "pose_Rx",
+            "pose_Ry",
+            "pose_Rz",
+        ])
+    }
+}
+
+/// A frame's expression, "neutral" for none.
+mod neutral {
+    use super::Expression;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(e: &Option<Expression>, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(e.map_or("neutral", |e| e.name()))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Expression>, D::Error> {
+        let name = String::deserialize(d)?;
+        match name.as_str() {
+            "neutral" => Ok(None),
+            s => s.parse().map(Some).map_err(serde::de::Error::custom),
+        }
+    }
+}
+
+/// One line of a seed's transfers: the setting, the frame's index into the reference, its
+/// AUs and activations.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TransferLine {
+    setting: Setting,
+    index: usize,
+    #[serde(with = "num::all")]
+    aus: [f64; AU_COUNT],
+    #[serde(with = "num::all")]
+    activations: [f64; CONTROL_COUNT],
+}
+
+impl CsvRow for TransferLine {
+    fn header() -> Vec<String> {
+        rows::wide(&["setting", "index"])
+    }
 }
 
 fn expression_name(e: Option<Expression>) -> &'static str {
@@ -436,150 +496,40 @@ impl Row {
     }
 }
 
-/// `cohort,subject,expression,frame,pose_Rx,pose_Ry,pose_Rz,AU01..AU45,<56 controls>`;
-/// numbers in Rust's shortest round-trip form.
 pub fn reference_csv(frames: &[RefFrame]) -> String {
-    let mut out = String::from("cohort,subject,expression,frame,pose_Rx,pose_Ry,pose_Rz");
-    for a in AU_NAMES {
-        out.push_str(&format!(",{a}"));
-    }
-    for c in control_names() {
-        out.push_str(&format!(",{c}"));
-    }
-    out.push('\n');
-    for f in frames {
-        out.push_str(&format!(
-            "{},{},{},{}",
-            f.cohort.name(),
-            f.subject,
-            expression_name(f.expression),
-            f.frame
-        ));
-        for v in f.pose.iter().chain(&f.aus).chain(&f.activations) {
-            out.push_str(&format!(",{v}"));
-        }
-        out.push('\n');
-    }
-    out
-}
-
-/// Cells of one CSV line, with numbers parsed on demand and errors naming file and line.
-struct Line<'a> {
-    name: &'a str,
-    line: usize,
-    cells: Vec<&'a str>,
-}
-
-impl Line<'_> {
-    fn num(&self, k: usize) -> Result<f64> {
-        self.cells[k].parse().with_context(|| {
-            format!(
-                "{}:{}: `{}` is not a number",
-                self.name, self.line, self.cells[k]
-            )
-        })
-    }
-
-    fn array<const N: usize>(&self, from: usize) -> Result<[f64; N]> {
-        let v: Vec<f64> = (from..from + N)
-            .map(|k| self.num(k))
-            .collect::<Result<_>>()?;
-        Ok(v.try_into().expect("N values"))
-    }
-}
-
-fn lines<'a>(text: &'a str, name: &'a str, expected: usize) -> Result<Vec<Line<'a>>> {
-    let mut it = text.lines();
-    let header = it.next().unwrap_or_default();
-    if header.split(',').count() != expected {
-        bail!(
-            "{name}: header has {} columns, expected {expected}",
-            header.split(',').count()
-        );
-    }
-    it.enumerate()
-        .map(|(i, l)| {
-            let cells: Vec<&str> = l.split(',').collect();
-            if cells.len() != expected {
-                bail!(
-                    "{name}:{}: {} cells, expected {expected}",
-                    i + 2,
-                    cells.len()
-                );
-            }
-            Ok(Line {
-                name,
-                line: i + 2,
-                cells,
-            })
-        })
-        .collect()
-}
-
-fn parse_expression(l: &Line, k: usize) -> Result<Option<Expression>> {
-    match l.cells[k] {
-        "neutral" => Ok(None),
-        s => {
-            Ok(Some(s.parse().map_err(|e| {
-                anyhow::anyhow!("{}:{}: {e}", l.name, l.line)
-            })?))
-        }
-    }
+    rows::to_csv(frames)
 }
 
 pub fn reference_from_csv(text: &str, name: &str) -> Result<Vec<RefFrame>> {
-    lines(text, name, 7 + AU_COUNT + CONTROL_COUNT)?
-        .into_iter()
-        .map(|l| {
-            Ok(RefFrame {
-                cohort: CohortKind::parse(l.cells[0]).with_context(|| {
-                    format!("{name}:{}: unknown cohort `{}`", l.line, l.cells[0])
-                })?,
-                subject: l.num(1)? as usize,
-                expression: parse_expression(&l, 2)?,
-                frame: l.num(3)? as usize,
-                pose: l.array(4)?,
-                aus: l.array(7)?,
-                activations: l.array(7 + AU_COUNT)?,
-            })
-        })
-        .collect()
+    Ok(rows::from_csv(text, name)?)
 }
 
 /// One seed's transfers: `setting,<frame index into the reference>,AU01..AU45,<56 controls>`.
 pub fn transfers_csv(t: &[(Setting, Vec<Transferred>)]) -> String {
-    let mut out = String::from("setting,index");
-    for a in AU_NAMES {
-        out.push_str(&format!(",{a}"));
-    }
-    for c in control_names() {
-        out.push_str(&format!(",{c}"));
-    }
-    out.push('\n');
-    for (setting, frames) in t {
-        for (i, f) in frames.iter().enumerate() {
-            out.push_str(&format!("{},{i}", setting.name()));
-            for v in f.aus.iter().chain(&f.activations) {
-                out.push_str(&format!(",{v}"));
-            }
-            out.push('\n');
-        }
-    }
-    out
+    let lines: Vec<TransferLine> = t
+        .iter()
+        .flat_map(|(setting, frames)| {
+            frames.iter().enumerate().map(|(index, f)| TransferLine {
+                setting: *setting,
+                index,
+                aus: f.aus,
+                activations: f.activations,
+            })
+        })
+        .collect();
+    rows::to_csv(&lines)
 }
 
 pub fn transfers_from_csv(text: &str, name: &str) -> Result<Vec<(Setting, Vec<Transferred>)>> {
     let mut out: Vec<(Setting, Vec<Transferred>)> = Vec::new();
-    for l in lines(text, name, 2 + AU_COUNT + CONTROL_COUNT)? {
-        let setting = Setting::parse(l.cells[0])
-            .with_context(|| format!("{name}:{}: unknown setting `{}`", l.line, l.cells[0]))?;
+    for l in rows::from_csv::<TransferLine>(text, name)? {
         let frame = Transferred {
-            aus: l.array(2)?,
-            activations: l.array(2 + AU_COUNT)?,
+            aus: l.aus,
+            activations: l.activations,
         };
         match out.last_mut() {
-            Some((s, v)) if *s == setting => v.push(frame),
-            _ => out.push((setting, vec![frame])),
+            Some((s, v)) if *s == l.setting => v.push(frame),
+            _ => out.push((l.setting, vec![frame])),
         }
     }
     Ok(out)

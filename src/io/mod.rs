@@ -13,6 +13,7 @@ pub mod openface;
 pub mod photo;
 pub mod reach;
 pub mod realdata;
+pub mod rows;
 
 use std::path::{Path, PathBuf};
 

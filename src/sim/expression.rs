@@ -7,7 +7,10 @@ use std::str::FromStr;
 
 use super::controls::{Activations, CONTROL_COUNT, JAW_SLIDE, JAW_TWIST};
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Expression {
     Joy,
     Sadness,

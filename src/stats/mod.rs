@@ -12,6 +12,14 @@ pub fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
 }
 
+/// Mean and population standard deviation (divided by n; 0 and 0 for no values).
+pub fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let n = v.len().max(1) as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+    (mean, sd)
+}
+
 /// Half-width of the 95% confidence interval of the mean (t distribution); 0 for one value.
 pub fn ci95(v: &[f64]) -> f64 {
     let n = v.len();

@@ -21,6 +21,7 @@ use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 
 use super::*;
+use crate::io::rows::{self, num, CsvRow};
 
 pub(super) fn basis_bytes(b: &LinearBasis) -> Vec<u8> {
     let mut out = Vec::new();
@@ -74,24 +75,71 @@ pub(super) fn basis_from(bytes: &[u8]) -> Result<LinearBasis> {
     })
 }
 
-pub(crate) fn curves_csv(curves: &Curves) -> String {
-    let mut out = String::from("epoch,train_mse,test_mse\n");
-    for (i, (a, b)) in curves.train.iter().zip(&curves.test).enumerate() {
-        out.push_str(&format!("{},{a},{b}\n", i + 1));
-    }
-    out
+/// A line of a training's `curves.csv`: the epoch (from 1) and its train and test MSE.
+#[derive(serde::Serialize, serde::Deserialize)]
+pub(crate) struct CurveLine {
+    pub(crate) epoch: usize,
+    #[serde(serialize_with = "num::shortest")]
+    pub(crate) train_mse: f64,
+    #[serde(serialize_with = "num::shortest")]
+    pub(crate) test_mse: f64,
 }
 
-pub(crate) fn curves_from(text: &str) -> Curves {
-    let mut c = Curves::default();
-    for line in text.lines().skip(1) {
-        let cells: Vec<f64> = line.split(',').filter_map(|s| s.parse().ok()).collect();
-        if cells.len() == 3 {
-            c.train.push(cells[1]);
-            c.test.push(cells[2]);
+impl CsvRow for CurveLine {}
+
+pub(crate) fn curves_csv(curves: &Curves) -> String {
+    let lines: Vec<CurveLine> = curves
+        .train
+        .iter()
+        .zip(&curves.test)
+        .enumerate()
+        .map(|(i, (&train_mse, &test_mse))| CurveLine {
+            epoch: i + 1,
+            train_mse,
+            test_mse,
+        })
+        .collect();
+    rows::to_csv(&lines)
+}
+
+/// A line of a run's `curves.csv`: a network of a seed at one epoch.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct NetworkCurveLine {
+    seed: u64,
+    network: String,
+    epoch: usize,
+    #[serde(serialize_with = "num::shortest")]
+    train_mse: f64,
+    #[serde(serialize_with = "num::shortest")]
+    test_mse: f64,
+}
+
+impl CsvRow for NetworkCurveLine {}
+
+/// Every network's curves: `seed,network,epoch,train_mse,test_mse`.
+pub(super) fn all_curves_csv(curves: &[((u64, Network), Curves)]) -> String {
+    let mut lines = Vec::new();
+    for ((seed, network), c) in curves {
+        for (i, (&train_mse, &test_mse)) in c.train.iter().zip(&c.test).enumerate() {
+            lines.push(NetworkCurveLine {
+                seed: *seed,
+                network: network.name(),
+                epoch: i + 1,
+                train_mse,
+                test_mse,
+            });
         }
     }
-    c
+    rows::to_csv(&lines)
+}
+
+pub(crate) fn curves_from(text: &str, name: &str) -> Result<Curves> {
+    let mut c = Curves::default();
+    for l in rows::from_csv::<CurveLine>(text, name)? {
+        c.train.push(l.train_mse);
+        c.test.push(l.test_mse);
+    }
+    Ok(c)
 }
 
 /// Everything one cell produced.
@@ -159,7 +207,10 @@ impl Artifact for Trained {
     fn decode(entry: &Entry) -> Result<Self> {
         Ok(Trained {
             mlp: Mlp::from_safetensors(&entry.read("weights.safetensors")?)?,
-            curves: curves_from(&text(entry, "curves.csv")?),
+            curves: curves_from(
+                &text(entry, "curves.csv")?,
+                &entry.path("curves.csv").display().to_string(),
+            )?,
         })
     }
 }
@@ -408,17 +459,38 @@ pub(super) fn run_cell(
     })
 }
 
+/// A line of `training_aus.csv`: one AU over all training pairs.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TrainingAuLine {
+    au: String,
+    #[serde(serialize_with = "num::shortest")]
+    min: f64,
+    #[serde(serialize_with = "num::shortest")]
+    max: f64,
+    #[serde(serialize_with = "num::shortest")]
+    mean: f64,
+    #[serde(serialize_with = "num::shortest")]
+    sd: f64,
+}
+
+impl CsvRow for TrainingAuLine {}
+
 /// Per AU: min, max, mean and SD over all training pairs (what Table 2 normalizes onto).
 pub(super) fn training_aus_csv(samples: &[Sample]) -> String {
-    let mut out = String::from("au,min,max,mean,sd\n");
-    let n = samples.len().max(1) as f64;
-    for (k, name) in AU_NAMES.iter().enumerate() {
-        let v: Vec<f64> = samples.iter().map(|s| s.aus[k]).collect();
-        let mean = v.iter().sum::<f64>() / n;
-        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
-        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        out.push_str(&format!("{name},{lo},{hi},{mean},{sd}\n"));
-    }
-    out
+    let lines: Vec<TrainingAuLine> = AU_NAMES
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let v: Vec<f64> = samples.iter().map(|s| s.aus[k]).collect();
+            let (mean, sd) = crate::stats::mean_sd(&v);
+            TrainingAuLine {
+                au: name.to_string(),
+                min: v.iter().copied().fold(f64::INFINITY, f64::min),
+                max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                mean,
+                sd,
+            }
+        })
+        .collect();
+    rows::to_csv(&lines)
 }

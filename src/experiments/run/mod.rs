@@ -214,15 +214,9 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             table1_csv(&result.rows).into_bytes(),
             &mut outputs,
         )?;
-        let mut curves = String::from("seed,network,epoch,train_mse,test_mse\n");
-        for ((seed, network), c) in &result.curves {
-            for (i, (tr, te)) in c.train.iter().zip(&c.test).enumerate() {
-                curves.push_str(&format!("{seed},{},{},{tr},{te}\n", network.name(), i + 1));
-            }
-        }
         write(
             format!("{prefix}curves.csv"),
-            curves.into_bytes(),
+            all_curves_csv(&result.curves).into_bytes(),
             &mut outputs,
         )?;
         if cells.len() == 1 {

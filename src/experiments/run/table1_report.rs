@@ -1,6 +1,7 @@
 //! Table 1's CSV, markdown, LaTeX and figures, and the sweep summary across cells.
 
 use crate::experiments::table1::{self, Network, Row};
+use crate::io::rows::{self, num, CsvRow};
 use crate::spec::Spec;
 use crate::stats;
 use anyhow::Result;
@@ -8,48 +9,57 @@ use std::path::Path;
 
 use super::*;
 
-pub(super) fn fmt(v: f64) -> String {
-    format!("{v:.6e}")
+/// A line of `table1.csv`: a seed (or `mean`, `ci95`), the six per-expression networks' test
+/// MSE, `all`, and the unified network's MSE per expression.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Table1Line {
+    seed: String,
+    #[serde(serialize_with = "num::sci_each::<6, _>")]
+    #[serde(deserialize_with = "num::all::deserialize")]
+    values: [f64; 13],
+}
+
+impl CsvRow for Table1Line {
+    fn header() -> Vec<String> {
+        let names = table1::ORDER.iter().map(|e| e.to_string());
+        std::iter::once("seed".to_string())
+            .chain(names.clone())
+            .chain(std::iter::once("all".to_string()))
+            .chain(names.map(|n| format!("unified_{n}")))
+            .collect()
+    }
 }
 
 /// `seed,joy,...,disgust,all,unified_joy,...` rows, then `mean` and `ci95`.
 pub(super) fn table1_csv(rows: &[Row]) -> String {
-    let names: Vec<String> = table1::ORDER.iter().map(|e| e.to_string()).collect();
-    let mut out = format!(
-        "seed,{},all,{}\n",
-        names.join(","),
-        names
-            .iter()
-            .map(|n| format!("unified_{n}"))
-            .collect::<Vec<_>>()
-            .join(",")
-    );
-    let line = |label: String, v: &[f64]| {
-        format!(
-            "{label},{}\n",
-            v.iter().map(|x| fmt(*x)).collect::<Vec<_>>().join(",")
-        )
-    };
-    let flat: Vec<Vec<f64>> = rows
+    let flat: Vec<[f64; 13]> = rows
         .iter()
         .map(|r| {
-            r.per_expression
-                .iter()
-                .chain(std::iter::once(&r.all))
-                .chain(&r.unified_restricted)
-                .copied()
-                .collect()
+            let mut v = [0.0; 13];
+            v[..6].copy_from_slice(&r.per_expression);
+            v[6] = r.all;
+            v[7..].copy_from_slice(&r.unified_restricted);
+            v
         })
         .collect();
-    for (r, v) in rows.iter().zip(&flat) {
-        out.push_str(&line(r.seed.to_string(), v));
-    }
+    let mut lines: Vec<Table1Line> = rows
+        .iter()
+        .zip(&flat)
+        .map(|(r, v)| Table1Line {
+            seed: r.seed.to_string(),
+            values: *v,
+        })
+        .collect();
     let column = |j: usize| flat.iter().map(|v| v[j]).collect::<Vec<_>>();
-    let means: Vec<f64> = (0..13).map(|j| stats::mean(&column(j))).collect();
-    let cis: Vec<f64> = (0..13).map(|j| stats::ci95(&column(j))).collect();
-    out.push_str(&line("mean".into(), &means));
-    out.push_str(&line("ci95".into(), &cis));
-    out
+    lines.push(Table1Line {
+        seed: "mean".into(),
+        values: std::array::from_fn(|j| stats::mean(&column(j))),
+    });
+    lines.push(Table1Line {
+        seed: "ci95".into(),
+        values: std::array::from_fn(|j| stats::ci95(&column(j))),
+    });
+    rows::to_csv(&lines)
 }
 
 pub(super) fn summary(rows: &[Row]) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
@@ -297,19 +307,37 @@ pub(super) fn sweep_figure(dir: &Path, rows: &[(String, Vec<Row>)]) -> Result<()
     )
 }
 
+/// A line of a sweep's CSV: a cell and its Table 1 summary over seeds.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct SweepLine {
+    cell: String,
+    #[serde(serialize_with = "num::sci::<6, _>")]
+    mse_all_mean: f64,
+    #[serde(serialize_with = "num::sci::<6, _>")]
+    mse_all_ci95: f64,
+    #[serde(serialize_with = "num::sci::<6, _>")]
+    mse_per_expression_mean: f64,
+}
+
+impl CsvRow for SweepLine {
+    const QUOTE_TEXT: bool = true;
+}
+
 pub(super) fn sweep_csv(rows: &[(String, Vec<Row>)]) -> String {
-    let mut out = String::from("cell,mse_all_mean,mse_all_ci95,mse_per_expression_mean\n");
-    for (name, r) in rows {
-        let all: Vec<f64> = r.iter().map(|x| x.all).collect();
-        let per: Vec<f64> = r.iter().map(|x| stats::mean(&x.per_expression)).collect();
-        out.push_str(&format!(
-            "\"{name}\",{},{},{}\n",
-            fmt(stats::mean(&all)),
-            fmt(stats::ci95(&all)),
-            fmt(stats::mean(&per))
-        ));
-    }
-    out
+    let lines: Vec<SweepLine> = rows
+        .iter()
+        .map(|(name, r)| {
+            let all: Vec<f64> = r.iter().map(|x| x.all).collect();
+            let per: Vec<f64> = r.iter().map(|x| stats::mean(&x.per_expression)).collect();
+            SweepLine {
+                cell: name.clone(),
+                mse_all_mean: stats::mean(&all),
+                mse_all_ci95: stats::ci95(&all),
+                mse_per_expression_mean: stats::mean(&per),
+            }
+        })
+        .collect();
+    rows::to_csv(&lines)
 }
 
 pub(super) fn sweep_markdown(experiment: &str, rows: &[(String, Vec<Row>)]) -> String {
