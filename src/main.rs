@@ -117,7 +117,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 let result =
                     observe::fit_observer(&realdata, &root, &inputs, &table.calibration())?;
                 let report_path = report.join("lopo.csv");
-                let report_bytes = observe::report_csv(&result.report)?;
+                let report_bytes = observe::report_csv(&result.report);
                 let readout_text = readout_csv(&result.readout, &result.provenance);
                 write_atomic(&report_path, &report_bytes)?;
                 write_atomic(&out, readout_text.as_bytes())?;

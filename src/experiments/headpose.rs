@@ -15,6 +15,7 @@ use crate::headneck::{
     dataset, face_motion, posed_face, sequences, static_targets, Learned, INPUTS, OUTPUTS,
     STRAIN_SCALE,
 };
+use crate::io::rows::{self, num, CsvRow};
 use crate::learn::mlp::{train, Curves, Pairs};
 use crate::report::compose::{labelled_grid, png_bytes};
 use crate::report::figures::{line_panels, Panel, XySeries, PALETTE};
@@ -302,18 +303,24 @@ pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
         .collect();
     let mut all = runs;
     all.extend(seq_runs);
-    let mut csv = String::from(
-        "controller,case,time,target_pitch,target_yaw,target_roll,pose_pitch,pose_yaw,pose_roll\n",
-    );
+    let mut lines = Vec::new();
     for (c, case, run) in &all {
-        for ((t, target), pose) in run.time.iter().zip(&run.target).zip(&run.pose) {
+        for ((&time, target), pose) in run.time.iter().zip(&run.target).zip(&run.pose) {
             let (a, b) = (target.degrees(), pose.degrees());
-            csv.push_str(&format!(
-                "{c},{case},{t:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}\n",
-                a[0], a[1], a[2], b[0], b[1], b[2]
-            ));
+            lines.push(TrajectoryLine {
+                controller: c.to_string(),
+                case: case.clone(),
+                time,
+                target_pitch: a[0],
+                target_yaw: a[1],
+                target_roll: a[2],
+                pose_pitch: b[0],
+                pose_yaw: b[1],
+                pose_roll: b[2],
+            });
         }
     }
+    let csv = rows::to_csv(&lines);
     Ok(Output {
         static_rows,
         sequence_rows,
@@ -330,38 +337,103 @@ fn opt(v: Option<f64>) -> String {
     v.map_or("never".into(), |v| format!("{v:.2}"))
 }
 
-pub fn static_csv(rows: &[StaticRow]) -> String {
-    let mut out = String::from(
-        "controller,target_pitch,target_yaw,target_roll,final_error_deg,late_max_error_deg,settling_time_s,final_pitch,final_yaw,final_roll\n",
-    );
-    for r in rows {
-        let (t, f) = (r.target.degrees(), r.final_pose.degrees());
-        out.push_str(&format!(
-            "{},{:.0},{:.0},{:.0},{:.4},{:.4},{},{:.4},{:.4},{:.4}\n",
-            r.controller,
-            t[0],
-            t[1],
-            t[2],
-            r.final_error,
-            r.late_max_error,
-            r.settling_time.map_or("".into(), |v| format!("{v:.3}")),
-            f[0],
-            f[1],
-            f[2]
-        ));
-    }
-    out
+/// A line of `headpose_trajectories.csv`: one controller's head at one time of one case
+/// (degrees).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TrajectoryLine {
+    controller: String,
+    case: String,
+    #[serde(serialize_with = "num::fixed::<3, _>")]
+    time: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    target_pitch: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    target_yaw: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    target_roll: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    pose_pitch: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    pose_yaw: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    pose_roll: f64,
 }
 
+impl CsvRow for TrajectoryLine {}
+
+/// A line of `headpose_static.csv`: one controller reaching one still target (degrees; the
+/// settling time empty where the head never settled).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct StaticLine {
+    controller: String,
+    #[serde(serialize_with = "num::fixed::<0, _>")]
+    target_pitch: f64,
+    #[serde(serialize_with = "num::fixed::<0, _>")]
+    target_yaw: f64,
+    #[serde(serialize_with = "num::fixed::<0, _>")]
+    target_roll: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    final_error_deg: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    late_max_error_deg: f64,
+    #[serde(serialize_with = "num::fixed_or_empty::<3, _>")]
+    settling_time_s: Option<f64>,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    final_pitch: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    final_yaw: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    final_roll: f64,
+}
+
+impl CsvRow for StaticLine {}
+
+pub fn static_csv(rows: &[StaticRow]) -> String {
+    let lines: Vec<StaticLine> = rows
+        .iter()
+        .map(|r| {
+            let (t, f) = (r.target.degrees(), r.final_pose.degrees());
+            StaticLine {
+                controller: r.controller.to_string(),
+                target_pitch: t[0],
+                target_yaw: t[1],
+                target_roll: t[2],
+                final_error_deg: r.final_error,
+                late_max_error_deg: r.late_max_error,
+                settling_time_s: r.settling_time,
+                final_pitch: f[0],
+                final_yaw: f[1],
+                final_roll: f[2],
+            }
+        })
+        .collect();
+    rows::to_csv(&lines)
+}
+
+/// A line of `headpose_sequences.csv`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct SequenceLine {
+    controller: String,
+    sequence: String,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    rms_error_deg: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    max_error_deg: f64,
+}
+
+impl CsvRow for SequenceLine {}
+
 pub fn sequences_csv(rows: &[SequenceRow]) -> String {
-    let mut out = String::from("controller,sequence,rms_error_deg,max_error_deg\n");
-    for r in rows {
-        out.push_str(&format!(
-            "{},{},{:.4},{:.4}\n",
-            r.controller, r.name, r.rms_error, r.max_error
-        ));
-    }
-    out
+    let lines: Vec<SequenceLine> = rows
+        .iter()
+        .map(|r| SequenceLine {
+            controller: r.controller.to_string(),
+            sequence: r.name.clone(),
+            rms_error_deg: r.rms_error,
+            max_error_deg: r.max_error,
+        })
+        .collect();
+    rows::to_csv(&lines)
 }
 
 /// `paper-tables/headpose.md`.

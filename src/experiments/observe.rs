@@ -246,7 +246,7 @@ pub use crate::io::realdata::default_realdata_root;
 
 /// One row of the validation report: how well an observer reproduces OpenFace's AU on the
 /// frames of `scope` (a held-out person, or `pooled` over all held-out frames).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AgreementRow {
     pub observer: String,
     pub scope: String,
@@ -255,6 +255,8 @@ pub struct AgreementRow {
     pub pearson_r: f64,
     pub mae: f64,
 }
+
+impl crate::io::rows::CsvRow for AgreementRow {}
 
 /// What `observe --fit` produces.
 pub struct ObserverFit {
@@ -410,12 +412,8 @@ pub fn fit_observer(
 }
 
 /// Writes the report as CSV (`observer,scope,au,frames,pearson_r,mae`).
-pub fn report_csv(rows: &[AgreementRow]) -> Result<Vec<u8>> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    for r in rows {
-        w.serialize(r)?;
-    }
-    Ok(w.into_inner()?)
+pub fn report_csv(rows: &[AgreementRow]) -> Vec<u8> {
+    crate::io::rows::to_csv(rows).into_bytes()
 }
 
 /// Prints, per AU, the pooled held-out r and MAE of the gains and of the fitted readout.

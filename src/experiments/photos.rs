@@ -19,6 +19,7 @@ use anyhow::{bail, Context, Result};
 
 use crate::io::openface::FaceRow;
 use crate::io::photo::decode_rgb;
+use crate::io::rows::{self, num, CsvRow};
 use crate::landmark::{metric, FaceMesh, Landmarker, RgbFrame, MESH_POINTS};
 use crate::observe::{landmarks, Calibration, Observer, AU_COUNT, LANDMARK_COUNT};
 use crate::sim::geom::V3;
@@ -448,24 +449,39 @@ pub fn openface_rows(l: &Landmarked, observer: &Observer) -> Result<Vec<FaceRow>
     Ok(rows)
 }
 
+/// A line of `landmarks.csv`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct LandmarkLine {
+    frame: usize,
+    vertex: usize,
+    #[serde(serialize_with = "num::fixed::<2, _>")]
+    x: f64,
+    #[serde(serialize_with = "num::fixed::<2, _>")]
+    y: f64,
+    #[serde(serialize_with = "num::fixed::<2, _>")]
+    z: f64,
+}
+
+impl CsvRow for LandmarkLine {}
+
 /// `landmarks.csv`: `frame,vertex,x,y,z` for every frame with a face (x, y in pixels, z scaled
 /// like x, as MediaPipe gives them).
 pub fn landmarks_csv(l: &Landmarked) -> String {
-    let mut s = String::from("frame,vertex,x,y,z\n");
+    let mut lines = Vec::new();
     for (i, f) in l.found.iter().enumerate() {
         if let Some(m) = &f.mesh {
-            for (v, p) in m.points.iter().take(MESH_POINTS).enumerate() {
-                s.push_str(&format!(
-                    "{},{v},{:.2},{:.2},{:.2}\n",
-                    i + 1,
-                    p[0],
-                    p[1],
-                    p[2]
-                ));
+            for (vertex, p) in m.points.iter().take(MESH_POINTS).enumerate() {
+                lines.push(LandmarkLine {
+                    frame: i + 1,
+                    vertex,
+                    x: p[0],
+                    y: p[1],
+                    z: p[2],
+                });
             }
         }
     }
-    s
+    rows::to_csv(&lines)
 }
 
 /// What `landmark_input` wrote (or [`landmark_files`] made) and found.

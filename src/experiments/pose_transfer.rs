@@ -17,6 +17,7 @@ use super::transfer::follow;
 use crate::cache::Entry;
 use crate::cohort::{CohortKind, CohortParams};
 use crate::experiments::stage::{text, Artifact, Stages, Unit};
+use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Mlp;
 use crate::sim::neck::{HeadPose, Neck, PoseSequence};
 
@@ -151,15 +152,37 @@ fn cells(r: &PoseRow, digits: usize) -> [String; 6] {
     ]
 }
 
+/// A line of `table2_pose.csv`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct PoseLine {
+    cohort: CohortKind,
+    frames: usize,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    mean_target_deg: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    mean_error_deg: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    rms_error_deg: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    max_error_deg: f64,
+}
+
+impl CsvRow for PoseLine {}
+
 /// `cohort,frames,mean_target_deg,mean_error_deg,rms_error_deg,max_error_deg`.
 pub fn csv(rows: &[PoseRow]) -> String {
-    let mut out =
-        String::from("cohort,frames,mean_target_deg,mean_error_deg,rms_error_deg,max_error_deg\n");
-    for r in rows {
-        out.push_str(&cells(r, 4).join(","));
-        out.push('\n');
-    }
-    out
+    let lines: Vec<PoseLine> = rows
+        .iter()
+        .map(|r| PoseLine {
+            cohort: r.cohort,
+            frames: r.frames,
+            mean_target_deg: r.mean_target_deg,
+            mean_error_deg: r.mean_error_deg,
+            rms_error_deg: r.rms_error_deg,
+            max_error_deg: r.max_error_deg,
+        })
+        .collect();
+    rows::to_csv(&lines)
 }
 
 /// The pose table beside Table 2.
@@ -183,27 +206,34 @@ pub fn markdown(rows: &[PoseRow]) -> String {
     out
 }
 
+/// A line of `errors.csv`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct ErrorLine {
+    #[serde(serialize_with = "num::shortest")]
+    error_deg: f64,
+}
+
+impl CsvRow for ErrorLine {}
+
 /// Each frame's pose error (degrees), as `errors.csv`.
 struct Errors(Vec<f64>);
 
 impl Artifact for Errors {
     fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
-        let mut text = String::from("error_deg\n");
-        for e in &self.0 {
-            text.push_str(&format!("{e}\n"));
-        }
-        Ok(vec![("errors.csv".into(), text.into_bytes())])
+        let lines: Vec<ErrorLine> = self
+            .0
+            .iter()
+            .map(|&error_deg| ErrorLine { error_deg })
+            .collect();
+        Ok(vec![(
+            "errors.csv".into(),
+            rows::to_csv(&lines).into_bytes(),
+        )])
     }
     fn decode(entry: &Entry) -> Result<Self> {
-        let errors = text(entry, "errors.csv")?
-            .lines()
-            .skip(1)
-            .map(|l| {
-                l.parse::<f64>()
-                    .with_context(|| format!("{}: `{l}`", entry.path("errors.csv").display()))
-            })
-            .collect::<Result<Vec<f64>>>()?;
-        Ok(Errors(errors))
+        let name = entry.path("errors.csv").display().to_string();
+        let lines: Vec<ErrorLine> = rows::from_csv(&text(entry, "errors.csv")?, &name)?;
+        Ok(Errors(lines.into_iter().map(|l| l.error_deg).collect()))
     }
 }
 

@@ -20,7 +20,8 @@ use crate::io::atomic::write_atomic;
 use crate::io::calibration::default_calibration_path;
 use crate::io::expressions::controls_activations;
 use crate::io::observer_fit::read_any_calibration;
-use crate::io::reach::{csv_text, read_reach, Measure, ReachLine, ReachRow};
+use crate::io::reach::{read_reach, Measure, ReachLine, ReachRow};
+use crate::io::rows::{self, CsvRow};
 use crate::observe::au::{Observer, AU_COUNT, AU_NAMES};
 use crate::observe::landmarks;
 use crate::report::figures::heat_map;
@@ -207,7 +208,7 @@ pub fn write_reach(
         .collect();
     let mut written = Vec::new();
     let reach_path = out.join("au_reach.csv");
-    write_atomic(&reach_path, csv_text(&lines)?.as_bytes())?;
+    write_atomic(&reach_path, rows::to_csv(&lines).as_bytes())?;
     written.push(reach_path);
 
     let matrix = muscle_au_matrix(&model, &observer)?;
@@ -248,7 +249,7 @@ pub fn write_reach(
 }
 
 /// One solved case of the sweep.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct SweepLine {
     pub case: String,
     pub kind: String,
@@ -262,6 +263,8 @@ pub struct SweepLine {
     pub min_lid_gap_mm: String,
     pub error: String,
 }
+
+impl CsvRow for SweepLine {}
 
 impl SweepLine {
     pub fn is_valid(&self) -> bool {
@@ -343,6 +346,6 @@ pub fn write_sweep(source: &FaceSource, out: &Path) -> Result<Vec<SweepLine>> {
     let model = source.model()?;
     let lines = sweep(&model, source)?;
     let path = out.join("validity.csv");
-    write_atomic(&path, csv_text(&lines)?.as_bytes())?;
+    write_atomic(&path, rows::to_csv(&lines).as_bytes())?;
     Ok(lines)
 }

@@ -19,6 +19,7 @@ use crate::dataset::reader::FaceReader;
 use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::io::openface::read_openface;
 use crate::io::realdata::RealInput;
+use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Mlp;
 use crate::observe::{Observer, AU_COUNT, AU_NAMES};
 use crate::sim::basis::LinearBasis;
@@ -240,87 +241,86 @@ const AU01: usize = 0;
 const AU02: usize = 1;
 const AU12: usize = 8;
 
-fn header() -> String {
-    let mut h = String::from("seed,file,person,setting,frames,skipped");
-    for a in AU_NAMES {
-        h.push(',');
-        h.push_str(a);
+/// A line of the real-data table: one file in one setting for one seed.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct FileLine {
+    seed: u64,
+    file: String,
+    person: String,
+    setting: Setting,
+    frames: usize,
+    skipped: usize,
+    #[serde(with = "num::all")]
+    mse: [f64; AU_COUNT],
+    #[serde(serialize_with = "num::shortest")]
+    mean: f64,
+    smile_frames: usize,
+    #[serde(serialize_with = "num::shortest")]
+    smile_au12_error: f64,
+    brow_frames: usize,
+    #[serde(serialize_with = "num::shortest")]
+    brow_au01_error: f64,
+    #[serde(serialize_with = "num::shortest")]
+    brow_au02_error: f64,
+}
+
+impl CsvRow for FileLine {
+    fn header() -> Vec<String> {
+        let head = ["seed", "file", "person", "setting", "frames", "skipped"];
+        let tail = [
+            "mean",
+            "smile_frames",
+            "smile_au12_error",
+            "brow_frames",
+            "brow_au01_error",
+            "brow_au02_error",
+        ];
+        head.into_iter()
+            .chain(AU_NAMES)
+            .chain(tail)
+            .map(String::from)
+            .collect()
     }
-    h.push_str(",mean,smile_frames,smile_au12_error,brow_frames,brow_au01_error,brow_au02_error\n");
-    h
 }
 
 /// The rows as CSV; numbers in Rust's shortest round-trip form, so reading gives the same bits.
 pub fn csv(rows: &[FileRow]) -> String {
-    let mut out = header();
-    for r in rows {
-        out.push_str(&format!(
-            "{},{},{},{},{},{}",
-            r.seed,
-            r.file,
-            r.person,
-            r.setting.name(),
-            r.frames,
-            r.skipped
-        ));
-        for v in &r.mse {
-            out.push_str(&format!(",{v}"));
-        }
-        out.push_str(&format!(
-            ",{},{},{},{},{},{}\n",
-            r.mean(),
-            r.smile.0,
-            r.smile.1,
-            r.brow.0,
-            r.brow.1,
-            r.brow.2
-        ));
-    }
-    out
+    let lines: Vec<FileLine> = rows
+        .iter()
+        .map(|r| FileLine {
+            seed: r.seed,
+            file: r.file.clone(),
+            person: r.person.clone(),
+            setting: r.setting,
+            frames: r.frames,
+            skipped: r.skipped,
+            mse: r.mse,
+            mean: r.mean(),
+            smile_frames: r.smile.0,
+            smile_au12_error: r.smile.1,
+            brow_frames: r.brow.0,
+            brow_au01_error: r.brow.1,
+            brow_au02_error: r.brow.2,
+        })
+        .collect();
+    rows::to_csv(&lines)
 }
 
 pub fn from_csv(text: &str, name: &str) -> Result<Vec<FileRow>> {
-    let mut lines = text.lines();
-    if lines.next().map(|h| format!("{h}\n")) != Some(header()) {
-        bail!("{name}: not a realfaces table (header differs)");
-    }
-    let expected = 6 + AU_COUNT + 6;
-    lines
-        .enumerate()
-        .map(|(i, line)| {
-            let c: Vec<&str> = line.split(',').collect();
-            if c.len() != expected {
-                bail!("{name}:{}: {} cells, expected {expected}", i + 2, c.len());
-            }
-            let num = |k: usize| -> Result<f64> {
-                c[k].parse()
-                    .with_context(|| format!("{name}:{}: `{}` is not a number", i + 2, c[k]))
-            };
-            let int = |k: usize| -> Result<usize> {
-                c[k].parse()
-                    .with_context(|| format!("{name}:{}: `{}` is not a count", i + 2, c[k]))
-            };
-            let mut mse = [0.0; AU_COUNT];
-            for (k, m) in mse.iter_mut().enumerate() {
-                *m = num(6 + k)?;
-            }
-            let b = 6 + AU_COUNT + 1;
-            Ok(FileRow {
-                seed: c[0]
-                    .parse()
-                    .with_context(|| format!("{name}:{}: bad seed", i + 2))?,
-                file: c[1].to_string(),
-                person: c[2].to_string(),
-                setting: Setting::parse(c[3])
-                    .with_context(|| format!("{name}:{}: unknown setting `{}`", i + 2, c[3]))?,
-                frames: int(4)?,
-                skipped: int(5)?,
-                mse,
-                smile: (int(b)?, num(b + 1)?),
-                brow: (int(b + 2)?, num(b + 3)?, num(b + 4)?),
-            })
+    Ok(rows::from_csv::<FileLine>(text, name)?
+        .into_iter()
+        .map(|l| FileRow {
+            seed: l.seed,
+            file: l.file,
+            person: l.person,
+            setting: l.setting,
+            frames: l.frames,
+            skipped: l.skipped,
+            mse: l.mse,
+            smile: (l.smile_frames, l.smile_au12_error),
+            brow: (l.brow_frames, l.brow_au01_error, l.brow_au02_error),
         })
-        .collect()
+        .collect())
 }
 
 fn f4(v: f64) -> String {

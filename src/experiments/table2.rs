@@ -117,7 +117,7 @@ impl CsvRow for RefFrame {
 }
 
 /// A frame's expression, "neutral" for none.
-mod neutral {
+pub(crate) mod neutral {
     use super::Expression;
     use serde::{Deserialize, Deserializer, Serializer};
 

@@ -17,6 +17,7 @@ use super::table2::{au_mse, predict_activations, solve_clip};
 use crate::headneck::{face_motion, posed_face, Learned};
 use crate::io::atomic::write_atomic;
 use crate::io::openface::{parse_openface, read_openface, write_openface, FaceRow};
+use crate::io::rows::{self, num, CsvRow};
 use crate::learn::{Mlp, Normalization, Normalizer};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{gif_bytes, side_by_side};
@@ -303,15 +304,15 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     };
     write("activations.csv", text.as_bytes())?;
     let mse = au_mse(&reference, &transferred);
-    let mut text = String::from("au,mse\n");
-    for (a, m) in AU_NAMES.iter().zip(&mse) {
-        text.push_str(&format!("{a},{m:.6e}\n"));
-    }
-    text.push_str(&format!(
-        "mean,{:.6e}\n",
-        mse.iter().sum::<f64>() / AU_COUNT as f64
-    ));
-    write("mse.csv", text.as_bytes())?;
+    let mean = mse.iter().sum::<f64>() / AU_COUNT as f64;
+    let lines: Vec<MseLine> = AU_NAMES
+        .iter()
+        .zip(&mse)
+        .map(|(a, &mse)| (a.to_string(), mse))
+        .chain([("mean".to_string(), mean)])
+        .map(|(au, mse)| MseLine { au, mse })
+        .collect();
+    write("mse.csv", rows::to_csv(&lines).as_bytes())?;
     let mut pose_error = None;
     if let Some(h) = &head {
         let mut text =
@@ -582,3 +583,13 @@ pub fn transfer_path(
     summary.written = written;
     Ok((summary, Some(landmarked)))
 }
+
+/// A line of a transfer's `mse.csv`: an AU (or `mean`) and its MSE against the input.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct MseLine {
+    au: String,
+    #[serde(serialize_with = "num::sci::<6, _>")]
+    mse: f64,
+}
+
+impl CsvRow for MseLine {}

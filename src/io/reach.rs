@@ -196,7 +196,7 @@ pub fn read_reach(path: &Path) -> Result<Vec<ReachRow>, ReachFileError> {
 }
 
 /// One row of `au_reach.csv`.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct ReachLine {
     pub au: String,
     pub controls: String,
@@ -207,14 +207,4 @@ pub struct ReachLine {
     pub observed: String,
 }
 
-/// Writes rows as CSV text with a header from the row type's fields.
-pub fn csv_text<T: Serialize>(rows: &[T]) -> Result<String, csv::Error> {
-    let mut writer = csv::Writer::from_writer(Vec::new());
-    for row in rows {
-        writer.serialize(row)?;
-    }
-    let bytes = writer
-        .into_inner()
-        .map_err(|e| csv::Error::from(e.into_error()))?;
-    Ok(String::from_utf8(bytes).expect("CSV of UTF-8 strings"))
-}
+impl crate::io::rows::CsvRow for ReachLine {}

@@ -213,6 +213,37 @@ pub mod num {
         s.collect_str(&format_args!("{v:.D$}"))
     }
 
+    /// `fixed`, or an empty cell for none.
+    pub fn fixed_or_empty<const D: usize, S: Serializer>(
+        v: &Option<f64>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        match v {
+            Some(v) => s.collect_str(&format_args!("{v:.D$}")),
+            None => s.serialize_none(),
+        }
+    }
+
+    /// `sci`, or an empty cell for none.
+    pub fn sci_or_empty<const D: usize, S: Serializer>(
+        v: &Option<f64>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        match v {
+            Some(v) => s.collect_str(&format_args!("{v:.D$e}")),
+            None => s.serialize_none(),
+        }
+    }
+
+    /// `fixed` for each element of a list.
+    pub fn fixed_each<const D: usize, S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+        let mut t = s.serialize_tuple(v.len())?;
+        for x in v {
+            t.serialize_element(&format!("{x:.D$}"))?;
+        }
+        t.end()
+    }
+
     /// Exponent notation with `D` digits after the point.
     pub fn sci<const D: usize, S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
         s.collect_str(&format_args!("{v:.D$e}"))

@@ -2,45 +2,76 @@
 
 use super::{InversionParams, Summary};
 use crate::cohort::CohortKind;
+use crate::io::rows::{self, num, CsvRow};
 
-/// The deterministic part:
-/// `cohort,method,frames,au_mse,landmark_rms_iod,iterations,stop_measure,converged_share,input_au_noise`
-/// (the last three empty for the network).
-pub fn csv(rows: &[Summary]) -> String {
-    let mut out = String::from(
-        "cohort,method,frames,au_mse,landmark_rms_iod,iterations,stop_measure,converged_share,input_au_noise\n",
-    );
-    for r in rows {
-        let (measure, share) = r.stop.map_or((String::new(), String::new()), |(m, c)| {
-            (format!("{m:.3e}"), format!("{c:.3}"))
-        });
-        out.push_str(&format!(
-            "{},{},{},{:.6e},{:.6e},{:.2},{measure},{share},{:.4}\n",
-            r.cohort.name(),
-            r.method,
-            r.frames,
-            r.au_mse,
-            r.landmark_rms,
-            r.iterations,
-            r.input_noise
-        ));
-    }
-    out
+/// A line of `inversion.csv` (the deterministic part): the stop measure, converged share and
+/// input noise are empty for the network.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct InversionLine {
+    cohort: CohortKind,
+    method: String,
+    frames: usize,
+    #[serde(serialize_with = "num::sci::<6, _>")]
+    au_mse: f64,
+    #[serde(serialize_with = "num::sci::<6, _>")]
+    landmark_rms_iod: f64,
+    #[serde(serialize_with = "num::fixed::<2, _>")]
+    iterations: f64,
+    #[serde(serialize_with = "num::sci_or_empty::<3, _>")]
+    stop_measure: Option<f64>,
+    #[serde(serialize_with = "num::fixed_or_empty::<3, _>")]
+    converged_share: Option<f64>,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    input_au_noise: f64,
 }
 
-/// Timings (vary from run to run): `cohort,method,ms_per_frame,ms_per_frame_with_solve`.
+impl CsvRow for InversionLine {}
+
+/// `cohort,method,frames,au_mse,landmark_rms_iod,iterations,stop_measure,converged_share,
+/// input_au_noise`.
+pub fn csv(rows: &[Summary]) -> String {
+    let lines: Vec<InversionLine> = rows
+        .iter()
+        .map(|r| InversionLine {
+            cohort: r.cohort,
+            method: r.method.to_string(),
+            frames: r.frames,
+            au_mse: r.au_mse,
+            landmark_rms_iod: r.landmark_rms,
+            iterations: r.iterations,
+            stop_measure: r.stop.map(|(m, _)| m),
+            converged_share: r.stop.map(|(_, c)| c),
+            input_au_noise: r.input_noise,
+        })
+        .collect();
+    rows::to_csv(&lines)
+}
+
+/// A line of the timings (they vary from run to run).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TimingLine {
+    cohort: CohortKind,
+    method: String,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    ms_per_frame: f64,
+    #[serde(serialize_with = "num::fixed::<4, _>")]
+    ms_per_frame_with_solve: f64,
+}
+
+impl CsvRow for TimingLine {}
+
+/// Timings: `cohort,method,ms_per_frame,ms_per_frame_with_solve`.
 pub fn timing_csv(rows: &[Summary]) -> String {
-    let mut out = String::from("cohort,method,ms_per_frame,ms_per_frame_with_solve\n");
-    for r in rows {
-        out.push_str(&format!(
-            "{},{},{:.4},{:.4}\n",
-            r.cohort.name(),
-            r.method,
-            r.ms,
-            r.ms_with_solve
-        ));
-    }
-    out
+    let lines: Vec<TimingLine> = rows
+        .iter()
+        .map(|r| TimingLine {
+            cohort: r.cohort,
+            method: r.method.to_string(),
+            ms_per_frame: r.ms,
+            ms_per_frame_with_solve: r.ms_with_solve,
+        })
+        .collect();
+    rows::to_csv(&lines)
 }
 
 /// "1st", "2nd", "3rd", "4th", ..., "11th", "12th", "13th", "21st".

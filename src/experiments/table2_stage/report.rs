@@ -3,14 +3,11 @@
 use crate::cohort::CohortKind;
 use crate::experiments::realfaces::FileRow;
 use crate::experiments::table2::{self, RefFrame, Row, Setting, Transferred};
+use crate::io::rows::{self, num, CsvRow};
 use crate::observe::{AU_COUNT, AU_NAMES};
 use crate::spec::Spec;
 use crate::stats;
 use anyhow::Result;
-
-pub(super) fn fmt(v: f64) -> String {
-    format!("{v:.6e}")
-}
 
 pub(super) fn row_name(kind: CohortKind, setting: Setting) -> String {
     format!("{}-{}", kind.name().replace('_', "-"), setting.name())
@@ -88,31 +85,53 @@ pub(super) fn real_summary(real: &[FileRow]) -> Vec<(String, Vec<f64>, Vec<f64>)
         .collect()
 }
 
+/// A line of `table2.csv`: a seed (or `mean`, `ci95`), a cohort and setting, the 17 AUs' MSE
+/// and their mean.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Table2Line {
+    seed: String,
+    cohort: CohortKind,
+    setting: Setting,
+    #[serde(serialize_with = "num::sci_each::<6, _>")]
+    #[serde(deserialize_with = "num::all::deserialize")]
+    mse: [f64; AU_COUNT + 1],
+}
+
+impl CsvRow for Table2Line {
+    fn header() -> Vec<String> {
+        let head = ["seed", "cohort", "setting"].into_iter();
+        head.chain(AU_NAMES)
+            .chain(["mean"])
+            .map(String::from)
+            .collect()
+    }
+}
+
 /// `seed,cohort,setting,AU01..AU45,mean`, per seed, then `mean` and `ci95` rows.
 pub fn csv(rows: &[Row]) -> String {
-    let mut out = format!("seed,cohort,setting,{},mean\n", AU_NAMES.join(","));
-    let line = |label: &str, k: CohortKind, s: Setting, v: &[f64]| {
-        format!(
-            "{label},{},{},{}\n",
-            k.name(),
-            s.name(),
-            v.iter().map(|x| fmt(*x)).collect::<Vec<_>>().join(",")
-        )
+    let line = |seed: String, cohort, setting, v: &[f64]| Table2Line {
+        seed,
+        cohort,
+        setting,
+        mse: std::array::from_fn(|k| v[k]),
     };
-    for r in rows {
-        let v: Vec<f64> = r.mse.iter().copied().chain([r.mean()]).collect();
-        out.push_str(&line(&r.seed.to_string(), r.cohort, r.setting, &v));
-    }
+    let mut lines: Vec<Table2Line> = rows
+        .iter()
+        .map(|r| {
+            let v: Vec<f64> = r.mse.iter().copied().chain([r.mean()]).collect();
+            line(r.seed.to_string(), r.cohort, r.setting, &v)
+        })
+        .collect();
     for Summary {
         key: (k, s),
         mean,
         ci,
     } in summary(rows)
     {
-        out.push_str(&line("mean", k, s, &mean));
-        out.push_str(&line("ci95", k, s, &ci));
+        lines.push(line("mean".into(), k, s, &mean));
+        lines.push(line("ci95".into(), k, s, &ci));
     }
-    out
+    rows::to_csv(&lines)
 }
 
 pub(super) fn paper_aus() -> Vec<usize> {
@@ -308,37 +327,50 @@ pub fn bars(path: &std::path::Path, rows: &[Row]) -> Result<()> {
     )
 }
 
-/// The transfer's per-frame data for the first seed: reference and transferred AUs per setting.
+/// A line of `table2_frames.csv`: a reference frame, its AUs and the first seed's transferred
+/// AUs in each setting.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct FrameLine {
+    cohort: CohortKind,
+    subject: usize,
+    #[serde(with = "table2::neutral")]
+    expression: Option<crate::sim::expression::Expression>,
+    frame: usize,
+    #[serde(serialize_with = "num::fixed_each::<4, _>")]
+    #[serde(deserialize_with = "num::all::deserialize")]
+    aus: [f64; 3 * AU_COUNT],
+}
+
+impl CsvRow for FrameLine {
+    fn header() -> Vec<String> {
+        let head = ["cohort", "subject", "expression", "frame"].map(String::from);
+        let groups = std::iter::once("ref").chain(Setting::ALL.map(Setting::name));
+        head.into_iter()
+            .chain(groups.flat_map(|g| AU_NAMES.map(|a| format!("{g}_{a}"))))
+            .collect()
+    }
+}
+
+/// The transfer's per-frame data for the first seed: reference and transferred AUs in both
+/// settings (`first` in `Setting::ALL` order, as the transfer stage makes it).
 pub fn frames_csv(reference: &[RefFrame], first: &[(Setting, Vec<Transferred>)]) -> String {
-    let mut out = String::from("cohort,subject,expression,frame");
-    for a in AU_NAMES {
-        out.push_str(&format!(",ref_{a}"));
-    }
-    for (s, _) in first {
-        for a in AU_NAMES {
-            out.push_str(&format!(",{}_{a}", s.name()));
-        }
-    }
-    out.push('\n');
-    for (i, f) in reference.iter().enumerate() {
-        out.push_str(&format!(
-            "{},{},{},{}",
-            f.cohort.name(),
-            f.subject,
-            f.expression.map_or("neutral", |e| e.name()),
-            f.frame
-        ));
-        for v in &f.aus {
-            out.push_str(&format!(",{v:.4}"));
-        }
-        for (_, t) in first {
-            for v in &t[i].aus {
-                out.push_str(&format!(",{v:.4}"));
+    debug_assert!(first.iter().map(|(s, _)| *s).eq(Setting::ALL));
+    let lines: Vec<FrameLine> = reference
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let transferred = first.iter().flat_map(|(_, t)| t[i].aus);
+            let all: Vec<f64> = f.aus.iter().copied().chain(transferred).collect();
+            FrameLine {
+                cohort: f.cohort,
+                subject: f.subject,
+                expression: f.expression,
+                frame: f.frame,
+                aus: std::array::from_fn(|k| all.get(k).copied().unwrap_or(f64::NAN)),
             }
-        }
-        out.push('\n');
-    }
-    out
+        })
+        .collect();
+    rows::to_csv(&lines)
 }
 
 /// The mean AU MSE over the 17 AUs and the seeds of one cohort and setting.
