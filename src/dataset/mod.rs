@@ -521,8 +521,7 @@ mod tests {
             .zip(&clean)
             .flat_map(|(n, c)| (0..AU_COUNT).map(move |k| n.aus[k] - c.aus[k]))
             .collect();
-        let mean = d.iter().sum::<f64>() / d.len() as f64;
-        let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+        let (mean, sd) = crate::stats::mean_sd(&d);
         assert!(
             mean.abs() < 0.01 && (sd - 0.2).abs() < 0.01,
             "mean {mean}, sd {sd}"

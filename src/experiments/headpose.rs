@@ -128,7 +128,7 @@ fn static_row(
     StaticRow {
         controller,
         target,
-        final_error: last.iter().sum::<f64>() / last.len().max(1) as f64,
+        final_error: crate::stats::mean_or_zero(&last),
         late_max_error: over(0.5).map(|(e, _)| *e).fold(0.0, f64::max),
         settling_time: match settled_from {
             None => Some(0.0),
@@ -296,7 +296,7 @@ pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
             SequenceRow {
                 controller: c,
                 name: name.clone(),
-                rms_error: (e.iter().map(|v| v * v).sum::<f64>() / e.len().max(1) as f64).sqrt(),
+                rms_error: crate::stats::rms(&e),
                 max_error: e.iter().copied().fold(0.0, f64::max),
             }
         })
@@ -467,7 +467,7 @@ pub fn markdown(out: &Output, spec: &crate::spec::Spec) -> String {
             rows.len(),
             rows.iter().map(|r| r.final_error).sum::<f64>() / n,
             rows.iter().map(|r| r.final_error).fold(0.0, f64::max),
-            settled.iter().sum::<f64>() / settled.len().max(1) as f64,
+            crate::stats::mean_or_zero(&settled),
             if all_settled {
                 format!("{:.2}", settled.iter().copied().fold(0.0, f64::max))
             } else {

@@ -298,13 +298,14 @@ fn agreement_rows(
         .map(|r| r.pearson_r)
         .filter(|r| r.is_finite())
         .collect();
-    let mae = rows.iter().map(|r| r.mae).sum::<f64>() / rows.len() as f64;
+    let maes: Vec<f64> = rows.iter().map(|r| r.mae).collect();
+    let mae = crate::stats::mean(&maes);
     rows.push(AgreementRow {
         observer: observer.into(),
         scope: scope.into(),
         au: "mean".into(),
         frames: ours.len(),
-        pearson_r: round4(rs.iter().sum::<f64>() / rs.len().max(1) as f64),
+        pearson_r: round4(crate::stats::mean_or_zero(&rs)),
         mae: round4(mae),
     });
     rows

@@ -56,7 +56,7 @@ pub struct FileRow {
 
 impl FileRow {
     pub fn mean(&self) -> f64 {
-        self.mse.iter().sum::<f64>() / AU_COUNT as f64
+        crate::stats::mean(&self.mse)
     }
 }
 
@@ -433,7 +433,7 @@ pub fn markdown(rows: &[FileRow], spec: &Spec) -> String {
         md.push_str(&format!(
             "| {} | {} |",
             setting.name(),
-            f4(p.iter().sum::<f64>() / AU_COUNT as f64)
+            f4(crate::stats::mean(&p))
         ));
         for v in p {
             md.push_str(&format!(" {} |", f4(v)));
@@ -475,10 +475,7 @@ pub fn sweep_markdown(cells: &[(String, Vec<FileRow>)]) -> String {
         for (_, rows) in cells {
             let of: Vec<&FileRow> = rows.iter().filter(|r| r.setting == setting).collect();
             let p = pooled(&of);
-            md.push_str(&format!(
-                " {} |",
-                f4(p.iter().sum::<f64>() / AU_COUNT as f64)
-            ));
+            md.push_str(&format!(" {} |", f4(crate::stats::mean(&p))));
         }
         md.push('\n');
     }

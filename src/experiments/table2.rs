@@ -333,17 +333,8 @@ pub fn flat_aus(kind: Normalization, input: &[[f64; AU_COUNT]]) -> Vec<usize> {
     }
     (0..AU_COUNT)
         .filter(|&k| {
-            let col = || input.iter().map(|r| r[k]);
-            let spread = match kind {
-                Normalization::MinMax => {
-                    col().fold(f64::NEG_INFINITY, f64::max) - col().fold(f64::INFINITY, f64::min)
-                }
-                _ => {
-                    let n = input.len().max(1) as f64;
-                    let mean = col().sum::<f64>() / n;
-                    (col().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt()
-                }
-            };
+            let column: Vec<f64> = input.iter().map(|r| r[k]).collect();
+            let (_, spread) = kind.offset_spread(&column);
             spread.is_nan() || spread < FLAT_SPREAD
         })
         .collect()
@@ -470,14 +461,13 @@ pub fn transfer(
 
 /// Per-AU MSE of (reference - transferred) / 5 over all frames.
 pub fn au_mse(reference: &[[f64; AU_COUNT]], transferred: &[[f64; AU_COUNT]]) -> [f64; AU_COUNT] {
-    let n = reference.len().max(1) as f64;
     std::array::from_fn(|k| {
-        reference
+        let d: Vec<f64> = reference
             .iter()
             .zip(transferred)
-            .map(|(r, t)| ((r[k] - t[k]) / AU_MAX).powi(2))
-            .sum::<f64>()
-            / n
+            .map(|(r, t)| (r[k] - t[k]) / AU_MAX)
+            .collect();
+        crate::stats::mean_square(&d)
     })
 }
 
@@ -492,7 +482,7 @@ pub struct Row {
 
 impl Row {
     pub fn mean(&self) -> f64 {
-        self.mse.iter().sum::<f64>() / AU_COUNT as f64
+        crate::stats::mean(&self.mse)
     }
 }
 

@@ -60,32 +60,16 @@ pub struct Normalizer {
 impl Normalizer {
     pub fn fit(kind: Normalization, pairs: &Pairs) -> Normalizer {
         let (n, d) = (pairs.len(), pairs.inputs);
-        let column = |j: usize| (0..n).map(move |i| pairs.x[i * d + j] as f64);
         let (offset, scale): (Vec<f32>, Vec<f32>) = (0..d)
-            .map(|j| match kind {
-                Normalization::None => (0.0, 1.0),
-                Normalization::MinMax => {
-                    let lo = column(j).fold(f64::INFINITY, f64::min);
-                    let hi = column(j).fold(f64::NEG_INFINITY, f64::max);
-                    let range = hi - lo;
-                    (
-                        lo as f32,
-                        if range > 1e-12 {
-                            (1.0 / range) as f32
-                        } else {
-                            1.0
-                        },
-                    )
-                }
-                Normalization::ZScore => {
-                    let mean = column(j).sum::<f64>() / n as f64;
-                    let var = column(j).map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
-                    let sd = var.sqrt();
-                    (
-                        mean as f32,
-                        if sd > 1e-12 { (1.0 / sd) as f32 } else { 1.0 },
-                    )
-                }
+            .map(|j| {
+                let column: Vec<f64> = (0..n).map(|i| pairs.x[i * d + j] as f64).collect();
+                let (offset, spread) = kind.offset_spread(&column);
+                let scale = if spread > 1e-12 {
+                    (1.0 / spread) as f32
+                } else {
+                    1.0
+                };
+                (offset as f32, scale)
             })
             .unzip();
         Normalizer { offset, scale }
@@ -212,11 +196,12 @@ impl Mlp {
             return Ok(0.0);
         }
         let p = self.predict(&pairs.x)?;
-        Ok(p.iter()
+        let d: Vec<f64> = p
+            .iter()
             .zip(&pairs.y)
-            .map(|(a, b)| ((a - b) as f64).powi(2))
-            .sum::<f64>()
-            / p.len() as f64)
+            .map(|(a, b)| (a - b) as f64)
+            .collect();
+        Ok(crate::stats::mean_square(&d))
     }
 
     /// Weights and normalization as safetensors bytes (names sorted, no metadata).

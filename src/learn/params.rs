@@ -11,6 +11,22 @@ pub enum Normalization {
 }
 
 impl Normalization {
+    /// What this normalization subtracts from a column and divides it by: (min, max - min)
+    /// for min-max, (mean, population SD) for z-score, (0, 1) for none. The one definition
+    /// the network's input normalizer and Table 2's flat-AU test share.
+    pub fn offset_spread(self, column: &[f64]) -> (f64, f64) {
+        match self {
+            Normalization::None => (0.0, 1.0),
+            Normalization::MinMax => {
+                let (lo, hi) = crate::stats::min_max(column);
+                (lo, hi - lo)
+            }
+            Normalization::ZScore => crate::stats::mean_sd(column),
+        }
+    }
+}
+
+impl Normalization {
     pub const NAMES: [&'static str; 3] = ["none", "minmax", "zscore"];
 
     pub fn parse(s: &str) -> Option<Normalization> {

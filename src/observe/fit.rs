@@ -174,8 +174,9 @@ pub fn fit_readout(
             .iter()
             .map(|r| (0..n).map(|j| w[j] * (r[j] - mean_x[j])).sum::<f64>())
             .collect();
-        let sd_fit = (fitted.iter().map(|v| v * v).sum::<f64>() / rows as f64).sqrt();
-        let sd_y = (y.iter().map(|r| (r[k] - mean_y[k]).powi(2)).sum::<f64>() / rows as f64).sqrt();
+        let sd_fit = crate::stats::rms(&fitted);
+        let column: Vec<f64> = y.iter().map(|r| r[k]).collect();
+        let (_, sd_y) = crate::stats::mean_sd(&column);
         if sd_fit > 1e-12 {
             let stretch = sd_y / sd_fit;
             w.iter_mut().for_each(|v| *v *= stretch);

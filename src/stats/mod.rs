@@ -8,8 +8,37 @@ const T975: [f64; 30] = [
     2.052, 2.048, 2.045, 2.042,
 ];
 
+/// The mean (NaN for no values).
 pub fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// The mean, 0 for no values (a mean error over nothing).
+pub fn mean_or_zero(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// The mean of the squares, 0 for no values: the MSE of differences.
+pub fn mean_square(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64
+}
+
+/// The root mean square, 0 for no values.
+pub fn rms(v: &[f64]) -> f64 {
+    mean_square(v).sqrt()
+}
+
+/// The mean squared difference of two equally long samples, 0 for none.
+pub fn mse(a: &[f64], b: &[f64]) -> f64 {
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    mean_square(&d)
+}
+
+/// The smallest and largest value (infinities for no values).
+pub fn min_max(v: &[f64]) -> (f64, f64) {
+    let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (lo, hi)
 }
 
 /// Mean and population standard deviation (divided by n; 0 and 0 for no values).
@@ -65,5 +94,16 @@ mod tests {
         assert_eq!(mean(&v), 3.0);
         assert!((ci95(&v) - 1.9629).abs() < 1e-3);
         assert_eq!(ci95(&[2.0]), 0.0);
+    }
+
+    #[test]
+    fn errors_of_known_samples() {
+        assert_eq!(mean_square(&[3.0, 4.0]), 12.5);
+        assert_eq!(rms(&[3.0, 4.0]), 12.5f64.sqrt());
+        assert_eq!(mse(&[1.0, 2.0], &[1.0, 4.0]), 2.0);
+        assert_eq!((rms(&[]), mean_or_zero(&[])), (0.0, 0.0));
+        assert!(mean(&[]).is_nan());
+        assert_eq!(min_max(&[2.0, -1.0, 5.0]), (-1.0, 5.0));
+        assert_eq!(mean_sd(&[1.0, 3.0]), (2.0, 1.0));
     }
 }

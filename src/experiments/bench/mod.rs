@@ -49,7 +49,7 @@ fn landmark_error(a: &[V3], b: &[V3]) -> (f64, f64) {
     let lb = landmarks(b);
     let d: Vec<f64> = la.iter().zip(&lb).map(|(p, q)| norm(sub(*p, *q))).collect();
     (
-        d.iter().sum::<f64>() / d.len() as f64,
+        crate::stats::mean(&d),
         d.iter().cloned().fold(0.0, f64::max),
     )
 }

@@ -187,7 +187,10 @@ pub struct InvertedFrame {
     pub methods: Vec<Scored>,
 }
 
+/// The RMS over landmarks of the distance between two landmark sets given as flattened
+/// `x, y, z` coordinates: the root of the summed squared coordinate differences per landmark.
 fn rms(a: &[f64], b: &[f64]) -> f64 {
+    debug_assert_eq!(a.len(), 3 * LANDMARK_COUNT);
     (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / LANDMARK_COUNT as f64).sqrt()
 }
 
@@ -436,13 +439,13 @@ pub fn summarize(frames: &[InvertedFrame], reference: &[RefFrame]) -> Vec<Summar
         if mine.is_empty() {
             continue;
         }
-        let n = mine.len() as f64;
-        let mean = |g: &dyn Fn(&InvertedFrame) -> f64| mine.iter().map(|f| g(f)).sum::<f64>() / n;
+        let mean = |g: &dyn Fn(&InvertedFrame) -> f64| {
+            let v: Vec<f64> = mine.iter().map(|f| g(f)).collect();
+            crate::stats::mean(&v)
+        };
         let input_noise = mean(&|f| {
-            (0..AU_COUNT)
-                .map(|k| (f.input_aus[k] - f.truth[k]).powi(2))
-                .sum::<f64>()
-                / AU_COUNT as f64
+            let d: Vec<f64> = (0..AU_COUNT).map(|k| f.input_aus[k] - f.truth[k]).collect();
+            crate::stats::mean_square(&d)
         })
         .sqrt();
         for (m, &method) in METHODS.iter().enumerate() {
@@ -459,10 +462,10 @@ pub fn summarize(frames: &[InvertedFrame], reference: &[RefFrame]) -> Vec<Summar
                 frames: mine.len(),
                 au_mse: mean(&|f| {
                     let t = f.methods[m].aus;
-                    (0..AU_COUNT)
-                        .map(|k| ((f.truth[k] - t[k]) / AU_MAX).powi(2))
-                        .sum::<f64>()
-                        / AU_COUNT as f64
+                    let d: Vec<f64> = (0..AU_COUNT)
+                        .map(|k| (f.truth[k] - t[k]) / AU_MAX)
+                        .collect();
+                    crate::stats::mean_square(&d)
                 }),
                 landmark_rms: mean(&|f| f.methods[m].landmark_rms),
                 iterations: mean(&|f| f.methods[m].iterations as f64),

@@ -39,7 +39,7 @@ pub(super) fn over_seeds(per_seed: &[&[f64; AU_COUNT]]) -> (Vec<f64>, Vec<f64>) 
                 if j < AU_COUNT {
                     m[j]
                 } else {
-                    m.iter().sum::<f64>() / AU_COUNT as f64
+                    crate::stats::mean(&m[..])
                 }
             })
             .collect()
