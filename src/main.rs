@@ -430,8 +430,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Sets the worker count for rayon and for candle (which reads `RAYON_NUM_THREADS` on every
-/// matrix product when it is unset, at a cost). Returns the count used.
 fn photo_neutral(name: &str) -> facelab::experiments::photos::PhotoNeutral {
     use facelab::experiments::photos::PhotoNeutral;
     match name {
@@ -450,6 +448,8 @@ fn print_landmarked(l: &facelab::experiments::photos::LandmarkOutput) {
     );
 }
 
+/// Sets the worker count for rayon and for candle (which reads `RAYON_NUM_THREADS` on every
+/// matrix product when it is unset, at a cost). Returns the count used.
 fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
     let n = threads.unwrap_or_else(|| {
         std::thread::available_parallelism()

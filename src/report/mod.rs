@@ -5,6 +5,7 @@ pub mod compose;
 pub mod figures;
 pub mod head;
 pub mod render;
+pub mod table;
 
 use std::path::Path;
 

@@ -294,7 +294,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 )?;
                 publish.table(
                     &format!("{report}table2.tex"),
-                    &table2_stage::tex(&t2.rows, real),
+                    &table2_stage::tex(&t2.rows, real, cell.spec.seeds.len()),
                 )?;
                 let figures = publish.figures.join(format!("{report}table2"));
                 for (name, bytes) in &t2.renders {

@@ -2,6 +2,7 @@
 
 use crate::experiments::table1::{self, Network, Row};
 use crate::io::rows::{self, num, CsvRow};
+use crate::report::table::{Table, TableRow};
 use crate::spec::Spec;
 use crate::stats;
 use anyhow::Result;
@@ -90,12 +91,6 @@ pub(super) fn paired_cell((m, c, excludes_zero): (f64, f64, bool), dagger: &str)
 }
 
 pub(super) fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> String {
-    let (mean, ci, umean, uci) = summary(rows);
-    let heads: Vec<String> = table1::ORDER
-        .iter()
-        .map(|e| format!("MSE_{}", capitalize(e.name())))
-        .chain(std::iter::once("MSE_All".into()))
-        .collect();
     let mut out =
         String::from("# Table 1: per-expression networks vs one unified network (test MSE)\n\n");
     out.push_str(&format!(
@@ -112,97 +107,60 @@ pub(super) fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> Stri
         spec.train.epochs,
         spec.train.normalization.name(),
     ));
-    out.push_str(&format!("| | {} |\n", heads.join(" | ")));
-    out.push_str(&format!("|---|{}\n", "---|".repeat(7)));
-    out.push_str(&format!(
-        "| Zeng et al. | {} |\n",
-        table1::PAPER
-            .iter()
-            .map(|v| format!("{v:.6}"))
-            .collect::<Vec<_>>()
-            .join(" | ")
-    ));
-    out.push_str(&format!(
-        "| facelab | {} |\n",
-        mean.iter()
-            .zip(&ci)
-            .map(|(m, c)| format!("{m:.2e} ± {c:.1e}"))
-            .collect::<Vec<_>>()
-            .join(" | ")
-    ));
-    out.push_str(&format!(
-        "| facelab / paper | {} |\n",
-        mean.iter()
-            .zip(&table1::PAPER)
-            .map(|(m, p)| format!("{:.2e}", m / p))
-            .collect::<Vec<_>>()
-            .join(" | ")
-    ));
-    out.push_str(&format!(
-        "| unified network, same pairs and outputs | {} | {:.2e} ± {:.1e} |\n",
-        umean
-            .iter()
-            .zip(&uci)
-            .map(|(m, c)| format!("{m:.2e} ± {c:.1e}"))
-            .collect::<Vec<_>>()
-            .join(" | "),
-        mean[6],
-        ci[6]
-    ));
-    out.push_str(&format!(
-        "| per-expression - unified, paired over seeds | {} | |\n",
-        table1::paired(rows)
-            .into_iter()
-            .map(|p| paired_cell(p, " †"))
-            .collect::<Vec<_>>()
-            .join(" | ")
-    ));
+    out.push_str(&table1_table(rows).markdown());
     out.push_str(
         "\nThe unified row scores the unified network on each expression's test pairs and only that expression's network outputs, the like-for-like comparison with the facelab row. The paired row is, per seed, the per-expression network's MSE minus the unified network's on those pairs, as mean ± 95% interval over seeds; † marks an interval that excludes 0 (negative: the per-expression network is better, positive: the unified one). The seeds vary the networks' initialization and batch order only; the dataset is the same for every seed.\n",
     );
     out
 }
 
-pub(super) fn table1_tex(rows: &[Row]) -> String {
+/// Table 1 as one table: the paper's row, ours, the ratio, the unified network on the same
+/// pairs and outputs, and the paired difference over seeds.
+fn table1_table(rows: &[Row]) -> Table {
     let (mean, ci, umean, uci) = summary(rows);
-    let mut out = String::from(
-        "\\begin{tabular}{lrrrrrrr}\n\\hline\n & Joy & Sadness & Fear & Anger & Surprise & Disgust & All \\\\\n\\hline\n",
-    );
-    out.push_str(&format!(
-        "Zeng et al. & {} \\\\\n",
-        table1::PAPER
-            .iter()
-            .map(|v| format!("{v:.6}"))
-            .collect::<Vec<_>>()
-            .join(" & ")
+    let header = std::iter::once(String::new())
+        .chain(
+            table1::ORDER
+                .iter()
+                .map(|e| format!("MSE_{}", capitalize(e.name()))),
+        )
+        .chain(std::iter::once("MSE_All".into()))
+        .collect();
+    let mut t = Table::new(header);
+    t.caption = Some("Table 1: per-expression networks vs one unified network (test MSE)".into());
+    let row = |label: &str, cells: Vec<String>| {
+        TableRow::new(std::iter::once(label.to_string()).chain(cells).collect())
+    };
+    let interval = |(m, c): (&f64, &f64)| format!("{m:.2e} ± {c:.1e}");
+    t.push(row(
+        "Zeng et al.",
+        table1::PAPER.iter().map(|v| format!("{v:.6}")).collect(),
     ));
-    out.push_str(&format!(
-        "facelab & {} \\\\\n",
+    t.push(row("facelab", mean.iter().zip(&ci).map(interval).collect()));
+    t.push(row(
+        "facelab / paper",
         mean.iter()
-            .zip(&ci)
-            .map(|(m, c)| format!("{m:.2e} $\\pm$ {c:.1e}"))
-            .collect::<Vec<_>>()
-            .join(" & ")
+            .zip(&table1::PAPER)
+            .map(|(m, p)| format!("{:.2e}", m / p))
+            .collect(),
     ));
-    out.push_str(&format!(
-        "unified, same outputs & {} & \\\\\n",
-        umean
-            .iter()
-            .zip(&uci)
-            .map(|(m, c)| format!("{m:.2e} $\\pm$ {c:.1e}"))
-            .collect::<Vec<_>>()
-            .join(" & ")
+    let unified = umean.iter().zip(&uci).map(interval);
+    t.push(row(
+        "unified network, same pairs and outputs",
+        unified.chain([interval((&mean[6], &ci[6]))]).collect(),
     ));
-    out.push_str(&format!(
-        "per-expression $-$ unified (paired) & {} & \\\\\n",
-        table1::paired(rows)
-            .into_iter()
-            .map(|p| paired_cell(p, "$^\\dagger$").replace('±', "$\\pm$"))
-            .collect::<Vec<_>>()
-            .join(" & ")
+    let paired = table1::paired(rows)
+        .into_iter()
+        .map(|p| paired_cell(p, " †"));
+    t.push(row(
+        "per-expression - unified, paired over seeds",
+        paired.chain([String::new()]).collect(),
     ));
-    out.push_str("\\hline\n\\end{tabular}\n");
-    out
+    t
+}
+
+pub(super) fn table1_tex(rows: &[Row]) -> String {
+    table1_table(rows).latex()
 }
 
 pub(super) fn capitalize(s: &str) -> String {

@@ -5,6 +5,7 @@ use crate::experiments::realfaces::FileRow;
 use crate::experiments::table2::{self, RefFrame, Row, Setting, Transferred};
 use crate::io::rows::{self, num, CsvRow};
 use crate::observe::{AU_COUNT, AU_NAMES};
+use crate::report::table::{Table, TableRow};
 use crate::spec::Spec;
 use crate::stats;
 use anyhow::Result;
@@ -181,47 +182,7 @@ pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame], real: &[FileRow]
         c.talking_videos.frames,
         count(CohortKind::TalkingVideos),
     ));
-    let aus = paper_aus();
-    out.push_str(&format!(
-        "| setting | {} | mean (17) |\n|---|{}---|\n",
-        table2::PAPER_AUS.join(" | "),
-        "---|".repeat(aus.len())
-    ));
-    let line = |name: &str, mean: &[f64], ci: &[f64]| {
-        let cell = |j: usize| {
-            if seeds > 1 {
-                format!("{:.3} ± {:.3}", mean[j], ci[j])
-            } else {
-                format!("{:.3}", mean[j])
-            }
-        };
-        format!(
-            "| {name} | {} | {} |\n",
-            aus.iter().map(|&j| cell(j)).collect::<Vec<_>>().join(" | "),
-            cell(AU_COUNT)
-        )
-    };
-    for Summary {
-        key: (k, s),
-        mean,
-        ci,
-    } in summary(rows)
-    {
-        out.push_str(&line(&row_name(k, s), &mean, &ci));
-        if let Some(p) = paper_row(k, s) {
-            let (name, v, m) = &table2::PAPER[p];
-            out.push_str(&format!(
-                "| *Zeng et al.: {name}* | {} | *{m:.3}* |\n",
-                v.iter()
-                    .map(|x| format!("*{x:.3}*"))
-                    .collect::<Vec<_>>()
-                    .join(" | ")
-            ));
-        }
-    }
-    for (name, mean, ci) in real_summary(real) {
-        out.push_str(&line(&name, &mean, &ci));
-    }
+    out.push_str(&table2_table(rows, real, seeds).markdown());
     if let (Some(file), Some(first)) = (&spec.table2_openface, real.first()) {
         out.push_str(&format!(
             "\nReal file: `{file}` ({} frames; {} rows with success = 0 skipped), a real \
@@ -247,56 +208,53 @@ pub fn markdown(rows: &[Row], spec: &Spec, frames: &[RefFrame], real: &[FileRow]
     out
 }
 
-pub fn tex(rows: &[Row], real: &[FileRow]) -> String {
+/// Table 2 as one table: per cohort and setting our mean (± 95% interval over seeds) with
+/// the paper's row for the same role under it, then the real file's rows.
+fn table2_table(rows: &[Row], real: &[FileRow], seeds: usize) -> Table {
     let aus = paper_aus();
-    let mut out = String::from(
-        "% Table 2: AU MSE of transferred expressions (facelab; paper rows in italics)\n",
-    );
-    out.push_str(&format!(
-        "\\begin{{tabular}}{{l{}}}\n\\hline\nSetting & {} & Average \\\\\n\\hline\n",
-        "r".repeat(aus.len() + 1),
-        table2::PAPER_AUS
-            .iter()
-            .map(|a| format!("MSE$_{{\\mathrm{{{a}}}}}$"))
-            .collect::<Vec<_>>()
-            .join(" & ")
-    ));
+    let header = std::iter::once("setting")
+        .chain(table2::PAPER_AUS)
+        .chain(["mean (17)"])
+        .map(String::from)
+        .collect();
+    let mut t = Table::new(header);
+    t.caption =
+        Some("Table 2: AU MSE of transferred expressions (facelab; paper rows in italics)".into());
+    let line = |name: &str, mean: &[f64], ci: &[f64]| {
+        let cell = |j: usize| {
+            if seeds > 1 {
+                format!("{:.3} ± {:.3}", mean[j], ci[j])
+            } else {
+                format!("{:.3}", mean[j])
+            }
+        };
+        let cells = aus.iter().map(|&j| cell(j)).chain([cell(AU_COUNT)]);
+        TableRow::new(std::iter::once(name.to_string()).chain(cells).collect())
+    };
     for Summary {
-        key: (k, s), mean, ..
+        key: (k, s),
+        mean,
+        ci,
     } in summary(rows)
     {
-        out.push_str(&format!(
-            "{} & {} & {:.3} \\\\\n",
-            row_name(k, s),
-            aus.iter()
-                .map(|&j| format!("{:.3}", mean[j]))
-                .collect::<Vec<_>>()
-                .join(" & "),
-            mean[AU_COUNT]
-        ));
+        t.push(line(&row_name(k, s), &mean, &ci));
         if let Some(p) = paper_row(k, s) {
             let (name, v, m) = &table2::PAPER[p];
-            out.push_str(&format!(
-                "\\textit{{{name}}} & {} & \\textit{{{m:.3}}} \\\\\n",
-                v.iter()
-                    .map(|x| format!("\\textit{{{x:.3}}}"))
-                    .collect::<Vec<_>>()
-                    .join(" & ")
+            let cells = v.iter().chain([m]).map(|x| format!("{x:.3}"));
+            let label = format!("Zeng et al.: {name}");
+            t.push(TableRow::emphasized(
+                std::iter::once(label).chain(cells).collect(),
             ));
         }
     }
-    for (name, mean, _) in real_summary(real) {
-        out.push_str(&format!(
-            "{name} & {} & {:.3} \\\\\n",
-            aus.iter()
-                .map(|&j| format!("{:.3}", mean[j]))
-                .collect::<Vec<_>>()
-                .join(" & "),
-            mean[AU_COUNT]
-        ));
+    for (name, mean, ci) in real_summary(real) {
+        t.push(line(&name, &mean, &ci));
     }
-    out.push_str("\\hline\n\\end{tabular}\n");
-    out
+    t
+}
+
+pub fn tex(rows: &[Row], real: &[FileRow], seeds: usize) -> String {
+    table2_table(rows, real, seeds).latex()
 }
 
 /// Per-AU MSE bars for every setting (mean over seeds), all 17 AUs and the mean.

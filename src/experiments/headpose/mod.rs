@@ -15,7 +15,7 @@ use crate::headneck::{
     dataset, face_motion, posed_face, sequences, static_targets, Learned, INPUTS, OUTPUTS,
     STRAIN_SCALE,
 };
-use crate::io::rows::{self, num, CsvRow};
+use crate::io::rows;
 use crate::learn::mlp::{train, Curves, Pairs};
 use crate::report::compose::{labelled_grid, png_bytes};
 use crate::report::figures::{line_panels, Panel, XySeries, PALETTE};
@@ -25,6 +25,10 @@ use crate::sim::neck::{
     simulate, BodyState, HeadPose, Neck, PoseSequence, Teacher, Trajectory, Voluntary,
 };
 use crate::sim::FaceModel;
+
+mod report;
+use report::TrajectoryLine;
+pub use report::{sequences_csv, static_csv};
 
 /// Bump when the data, training or evaluation change meaning. 5: the teacher's projected
 /// gradient restarts its momentum on the proximal-gradient test and always takes its step.
@@ -335,105 +339,6 @@ pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
 
 fn opt(v: Option<f64>) -> String {
     v.map_or("never".into(), |v| format!("{v:.2}"))
-}
-
-/// A line of `headpose_trajectories.csv`: one controller's head at one time of one case
-/// (degrees).
-#[derive(serde::Serialize, serde::Deserialize)]
-struct TrajectoryLine {
-    controller: String,
-    case: String,
-    #[serde(serialize_with = "num::fixed::<3, _>")]
-    time: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    target_pitch: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    target_yaw: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    target_roll: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    pose_pitch: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    pose_yaw: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    pose_roll: f64,
-}
-
-impl CsvRow for TrajectoryLine {}
-
-/// A line of `headpose_static.csv`: one controller reaching one still target (degrees; the
-/// settling time empty where the head never settled).
-#[derive(serde::Serialize, serde::Deserialize)]
-struct StaticLine {
-    controller: String,
-    #[serde(serialize_with = "num::fixed::<0, _>")]
-    target_pitch: f64,
-    #[serde(serialize_with = "num::fixed::<0, _>")]
-    target_yaw: f64,
-    #[serde(serialize_with = "num::fixed::<0, _>")]
-    target_roll: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    final_error_deg: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    late_max_error_deg: f64,
-    #[serde(serialize_with = "num::fixed_or_empty::<3, _>")]
-    settling_time_s: Option<f64>,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    final_pitch: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    final_yaw: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    final_roll: f64,
-}
-
-impl CsvRow for StaticLine {}
-
-pub fn static_csv(rows: &[StaticRow]) -> String {
-    let lines: Vec<StaticLine> = rows
-        .iter()
-        .map(|r| {
-            let (t, f) = (r.target.degrees(), r.final_pose.degrees());
-            StaticLine {
-                controller: r.controller.to_string(),
-                target_pitch: t[0],
-                target_yaw: t[1],
-                target_roll: t[2],
-                final_error_deg: r.final_error,
-                late_max_error_deg: r.late_max_error,
-                settling_time_s: r.settling_time,
-                final_pitch: f[0],
-                final_yaw: f[1],
-                final_roll: f[2],
-            }
-        })
-        .collect();
-    rows::to_csv(&lines)
-}
-
-/// A line of `headpose_sequences.csv`.
-#[derive(serde::Serialize, serde::Deserialize)]
-struct SequenceLine {
-    controller: String,
-    sequence: String,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    rms_error_deg: f64,
-    #[serde(serialize_with = "num::fixed::<4, _>")]
-    max_error_deg: f64,
-}
-
-impl CsvRow for SequenceLine {}
-
-pub fn sequences_csv(rows: &[SequenceRow]) -> String {
-    let lines: Vec<SequenceLine> = rows
-        .iter()
-        .map(|r| SequenceLine {
-            controller: r.controller.to_string(),
-            sequence: r.name.clone(),
-            rms_error_deg: r.rms_error,
-            max_error_deg: r.max_error,
-        })
-        .collect();
-    rows::to_csv(&lines)
 }
 
 /// `paper-tables/headpose.md`.
