@@ -265,6 +265,89 @@ impl<'a> Stages<'a> {
         Ok(value)
     }
 
+    /// Independent units of one stage: each read from the cache, or computed — the missing
+    /// ones in parallel on rayon's workers, each stored as it finishes, so a killed run keeps
+    /// every unit that finished. `compute(i)` makes unit `i`'s artifact; the result and the
+    /// records are in the units' order whatever order they finish in.
+    pub fn get_or_compute_each<T: Artifact + Send>(
+        &mut self,
+        units: &[Unit],
+        compute: impl Fn(usize) -> Result<T> + Sync,
+    ) -> Result<Vec<T>> {
+        use rayon::prelude::*;
+        let mut found: Vec<Option<(T, f64)>> = Vec::with_capacity(units.len());
+        for unit in units {
+            let t = Instant::now();
+            let name = self.name(unit);
+            match self.cache.get(unit.stage, &unit.key)? {
+                Lookup::Hit(entry) => {
+                    let value = T::decode(&entry).with_context(|| {
+                        format!("the cached {} in {}", unit.stage, entry.dir.display())
+                    })?;
+                    if verbosity() == Verbosity::Verbose {
+                        eprintln!("{name}: cached");
+                    }
+                    found.push(Some((value, t.elapsed().as_secs_f64())));
+                }
+                Lookup::Damaged { dir, reason } => {
+                    eprintln!(
+                        "{name}: the cached entry {} is damaged ({reason}); recomputing",
+                        dir.display()
+                    );
+                    found.push(None);
+                }
+                Lookup::Missing => found.push(None),
+            }
+        }
+        let missing: Vec<usize> = (0..units.len()).filter(|&i| found[i].is_none()).collect();
+        let names: Vec<String> = units.iter().map(|u| self.name(u)).collect();
+        let cache = self.cache;
+        let computed: Vec<(usize, T, f64)> = missing
+            .par_iter()
+            .map(|&i| {
+                let (unit, t) = (&units[i], Instant::now());
+                if verbosity() != Verbosity::Quiet {
+                    eprintln!("{}: computing", names[i]);
+                }
+                let value = compute(i)?;
+                cache.put(unit.stage, &unit.key, &value.encode()?)?;
+                let seconds = t.elapsed().as_secs_f64();
+                if verbosity() != Verbosity::Quiet {
+                    eprintln!("{}: done in {}", names[i], duration(seconds));
+                }
+                Ok((i, value, seconds))
+            })
+            .collect::<Result<_>>()?;
+        let mut computed: Vec<Option<(T, f64)>> = {
+            let mut slots: Vec<Option<(T, f64)>> = (0..units.len()).map(|_| None).collect();
+            for (i, value, seconds) in computed {
+                slots[i] = Some((value, seconds));
+            }
+            slots
+        };
+        let mut out = Vec::with_capacity(units.len());
+        for (i, unit) in units.iter().enumerate() {
+            let (hit, (value, seconds)) = match found[i].take() {
+                Some(v) => (true, v),
+                None => (
+                    false,
+                    computed[i]
+                        .take()
+                        .context("every missing unit is computed")?,
+                ),
+            };
+            self.records.push(StageRecord {
+                cell: self.cell.clone(),
+                stage: unit.stage.to_string(),
+                key: unit.key.clone(),
+                hit,
+                seconds,
+            });
+            out.push(value);
+        }
+        Ok(out)
+    }
+
     /// Records what a unit did (a cache hit or a computation) and how long it took.
     fn record(&mut self, unit: &Unit, hit: bool, since: Instant) {
         self.records.push(StageRecord {
@@ -304,6 +387,48 @@ mod tests {
         fn decode(entry: &Entry) -> Result<Self> {
             Ok(Number(text(entry, "n.txt")?.parse()?))
         }
+    }
+
+    #[test]
+    fn independent_units_come_back_in_order_whichever_were_cached() {
+        let dir = std::env::temp_dir().join(format!("facelab-stage-each-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let cache = Cache::new(&dir);
+        let units: Vec<Unit> = (0..6).map(|i| Unit::new("each", 1, &i, &[])).collect();
+        let mut records = Vec::new();
+        // Units 1 and 4 are cached first, one at a time.
+        for i in [1, 4] {
+            Stages::new(&cache, "", &mut records)
+                .get_or_compute(&units[i], |_| Ok(Number(10 * i as u32)))
+                .unwrap();
+        }
+        records.clear();
+        let calls = std::sync::atomic::AtomicU32::new(0);
+        let got = Stages::new(&cache, "", &mut records)
+            .get_or_compute_each(&units, |i| {
+                calls.fetch_add(1, Ordering::Relaxed);
+                Ok(Number(10 * i as u32))
+            })
+            .unwrap();
+        assert_eq!(
+            got.iter().map(|n| n.0).collect::<Vec<_>>(),
+            [0, 10, 20, 30, 40, 50]
+        );
+        assert_eq!(calls.load(Ordering::Relaxed), 4);
+        let hits: Vec<bool> = records.iter().map(|r| r.hit).collect();
+        assert_eq!(hits, [false, true, false, false, true, false]);
+        let keys: Vec<&str> = records.iter().map(|r| r.key.as_str()).collect();
+        let expected: Vec<&str> = units.iter().map(|u| u.key.as_str()).collect();
+        assert_eq!(keys, expected);
+        // A failing unit fails the call; the units that finished stay cached.
+        let err = Stages::new(&cache, "", &mut Vec::new())
+            .get_or_compute_each(&[Unit::new("each", 1, &99, &[])], |_| -> Result<Number> {
+                anyhow::bail!("no number")
+            })
+            .map(|_| ())
+            .unwrap_err();
+        assert_eq!(err.to_string(), "no number");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

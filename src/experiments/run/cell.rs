@@ -312,11 +312,17 @@ pub(super) fn run_cell(
     };
 
     // Training: every (seed, network).
+    // The networks are independent: the missing ones train in parallel, one candle thread
+    // each (a small MLP trains fastest on one thread), with the same bytes as one by one.
     let progress = stages.bar(k.train.len() as u64, "train");
-    let mut nets: BTreeMap<(u64, Network), Mlp> = BTreeMap::new();
-    let mut curves = Vec::new();
-    for ((seed, network), key) in &k.train {
-        let trained = stages.get_or_compute(&Unit::keyed("train", key), |_| {
+    let units: Vec<Unit> = k
+        .train
+        .iter()
+        .map(|(_, key)| Unit::keyed("train", key))
+        .collect();
+    let trained = learn::one_thread_each(|| {
+        stages.get_or_compute_each(&units, |i| {
+            let ((seed, network), _) = &k.train[i];
             let split = table1::split(&samples, spec.dataset.test_fraction, *seed);
             let (train_pairs, test_pairs) =
                 table1::network_pairs(*network, &samples, &split, &a.facs);
@@ -330,13 +336,17 @@ pub(super) fn run_cell(
                 &mut uniform,
             )
             .with_context(|| format!("training the {} network, seed {seed}", network.name()))?;
+            progress.inc(1);
             Ok(Trained { mlp, curves })
-        })?;
-        nets.insert((*seed, *network), trained.mlp);
-        curves.push(((*seed, *network), trained.curves));
-        progress.inc(1);
-    }
+        })
+    })?;
     progress.finish_and_clear();
+    let mut nets: BTreeMap<(u64, Network), Mlp> = BTreeMap::new();
+    let mut curves = Vec::new();
+    for (((seed, network), _), t) in k.train.iter().zip(trained) {
+        nets.insert((*seed, *network), t.mlp);
+        curves.push(((*seed, *network), t.curves));
+    }
 
     let wants_table2 = spec.tables.iter().any(|t| t == "table2");
     let calibration = spec_calibration(spec)?;
