@@ -85,6 +85,33 @@ fn headpose_spec_writes_its_tables_and_figures_identically_on_any_thread_count()
         let late_max: f64 = line.split(',').nth(5).unwrap().parse().unwrap();
         assert!(late_max < 2.0, "{line}");
     }
+    // A rerun reads the tracking runs from the cache (`headpose_eval`) and writes the same
+    // tables, CSVs and figures.
+    let c = tiny_run(&one.join("results"), "1");
+    assert!(c.status.success(), "{}", String::from_utf8_lossy(&c.stderr));
+    let text =
+        std::fs::read_to_string(one.join("results/headpose/run-0002/manifest.json")).unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let stages = manifest["stages"].as_array().unwrap();
+    assert!(
+        stages.iter().any(|s| s["stage"] == "headpose_eval")
+            && stages.iter().all(|s| s["hit"] == true),
+        "{text}"
+    );
+    assert_same_bytes(
+        &one.join("results/headpose/run-0001"),
+        &one.join("results/headpose/run-0002"),
+        &[
+            "headpose_static.csv",
+            "headpose_sequences.csv",
+            "headpose_trajectories.csv",
+            "paper-tables/headpose.md",
+            "figures/headpose/static_teacher.png",
+            "figures/headpose/sequences.png",
+            "figures/headpose/face_poses.png",
+        ],
+        "computed and read from the cache",
+    );
 }
 
 /// A neutral face turning its head: yaw sweeps to `yaw_degrees`, pitch nods a little.

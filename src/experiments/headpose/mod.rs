@@ -21,14 +21,12 @@ use crate::report::compose::{labelled_grid, png_bytes};
 use crate::report::figures::{line_panels, Panel, XySeries, PALETTE};
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::rng::stream;
-use crate::sim::neck::{
-    simulate, BodyState, HeadPose, Neck, PoseSequence, Teacher, Trajectory, Voluntary,
-};
+use crate::sim::neck::{simulate, BodyState, HeadPose, Neck, PoseSequence, Teacher, Voluntary};
 use crate::sim::FaceModel;
 
 mod report;
-use report::TrajectoryLine;
 pub use report::{sequences_csv, static_csv};
+use report::{Track, Tracks, TrajectoryLine};
 
 /// Bump when the data, training or evaluation change meaning. 5: the teacher's projected
 /// gradient restarts its momentum on the proximal-gradient test and always takes its step.
@@ -106,7 +104,7 @@ pub struct SequenceRow {
     pub max_error: f64,
 }
 
-fn errors(run: &Trajectory) -> Vec<f64> {
+fn errors(run: &Track) -> Vec<f64> {
     run.pose
         .iter()
         .zip(&run.target)
@@ -114,12 +112,7 @@ fn errors(run: &Trajectory) -> Vec<f64> {
         .collect()
 }
 
-fn static_row(
-    controller: &'static str,
-    target: HeadPose,
-    run: &Trajectory,
-    band: f64,
-) -> StaticRow {
+fn static_row(controller: &'static str, target: HeadPose, run: &Track, band: f64) -> StaticRow {
     let e = errors(run);
     let end = *run.time.last().unwrap_or(&0.0);
     let over = |from: f64| {
@@ -155,7 +148,7 @@ pub struct Output {
     /// The voluntary network (safetensors).
     pub weights: Vec<u8>,
     /// Kept for the figures.
-    runs: Vec<(&'static str, String, Trajectory)>,
+    runs: Vec<(&'static str, String, Track)>,
 }
 
 /// What the teacher's training pairs depend on: its targets, poses and split.
@@ -187,6 +180,17 @@ pub fn data_unit(spec: &crate::spec::Spec) -> Unit {
         range_degrees: h.range_degrees,
     };
     Unit::new("headpose_data", HEADPOSE_VERSION, &inputs, &[])
+}
+
+/// The tracking runs of the network trained under `train_key`: the neck, the targets' range,
+/// durations and sequences (`headpose.*`).
+pub fn eval_unit(spec: &crate::spec::Spec, train_key: &str) -> Unit {
+    Unit::new(
+        "headpose_eval",
+        HEADPOSE_VERSION,
+        &spec.headpose,
+        &[train_key],
+    )
 }
 
 /// The voluntary network, trained on the data of `data_key`.
@@ -229,51 +233,47 @@ pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
         Ok(Trained { mlp, curves })
     })?;
 
-    // Static targets, both controllers; sequences with the learned one.
+    // Static targets, both controllers; sequences with the learned one: cached, since the
+    // 54 runs at 4 kHz are most of a rerun's time.
     let targets = static_targets(p.range_degrees);
-    let every = (neck.params.simulation_rate / SAMPLE_RATE).round() as usize;
-    let progress = stages.bar(2 * targets.len() as u64, "head pose tracking");
     let jobs: Vec<(&'static str, usize)> = ["teacher", "learned"]
         .into_iter()
         .flat_map(|c| (0..targets.len()).map(move |i| (c, i)))
         .collect();
-    let runs: Vec<(&'static str, String, Trajectory)> = jobs
-        .par_iter()
-        .map(|&(c, i)| -> Result<(&'static str, String, Trajectory)> {
-            let target = targets[i];
-            let mut controller: Box<dyn Voluntary + '_> = match c {
-                "teacher" => Box::new(Teacher::default()),
-                _ => Box::new(Learned { mlp: &mlp }),
-            };
-            let run = simulate(
-                &neck,
-                controller.as_mut(),
-                &PoseSequence::hold(target),
-                BodyState::rest(),
-                p.duration,
-                every,
-            )
-            .with_context(|| format!("{c} controller, target {:?} deg", target.degrees()))?;
-            progress.inc(1);
-            let d = target.degrees();
-            Ok((
-                c,
-                format!("static {:.0} {:.0} {:.0}", d[0], d[1], d[2]),
-                run,
-            ))
-        })
-        .collect::<Result<_>>()?;
-    progress.finish_and_clear();
-    let static_rows = runs
-        .iter()
-        .zip(&jobs)
-        .map(|((c, _, run), &(_, i))| static_row(c, targets[i], run, p.settle_degrees))
-        .collect();
     let seqs = sequences(p.range_degrees, p.sequence_seconds);
-    let seq_runs: Vec<(&'static str, String, Trajectory)> = seqs
-        .par_iter()
-        .map(
-            |(name, seq)| -> Result<(&'static str, String, Trajectory)> {
+    let evaluation = eval_unit(spec, &training.key);
+    let Tracks(all) = stages.get_or_compute(&evaluation, |stages| {
+        let every = (neck.params.simulation_rate / SAMPLE_RATE).round() as usize;
+        let progress = stages.bar((jobs.len() + seqs.len()) as u64, "head pose tracking");
+        let mut runs: Vec<(&'static str, String, Track)> = jobs
+            .par_iter()
+            .map(|&(c, i)| -> Result<(&'static str, String, Track)> {
+                let target = targets[i];
+                let mut controller: Box<dyn Voluntary + '_> = match c {
+                    "teacher" => Box::new(Teacher::default()),
+                    _ => Box::new(Learned { mlp: &mlp }),
+                };
+                let run = simulate(
+                    &neck,
+                    controller.as_mut(),
+                    &PoseSequence::hold(target),
+                    BodyState::rest(),
+                    p.duration,
+                    every,
+                )
+                .with_context(|| format!("{c} controller, target {:?} deg", target.degrees()))?;
+                progress.inc(1);
+                let d = target.degrees();
+                Ok((
+                    c,
+                    format!("static {:.0} {:.0} {:.0}", d[0], d[1], d[2]),
+                    Track::of(run),
+                ))
+            })
+            .collect::<Result<_>>()?;
+        let seq_runs: Vec<(&'static str, String, Track)> = seqs
+            .par_iter()
+            .map(|(name, seq)| -> Result<(&'static str, String, Track)> {
                 let mut learned = Learned { mlp: &mlp };
                 let run = simulate(
                     &neck,
@@ -284,10 +284,27 @@ pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
                     every,
                 )
                 .with_context(|| format!("learned controller, sequence {name}"))?;
-                Ok(("learned", name.clone(), run))
-            },
-        )
-        .collect::<Result<_>>()?;
+                progress.inc(1);
+                Ok(("learned", name.clone(), Track::of(run)))
+            })
+            .collect::<Result<_>>()?;
+        progress.finish_and_clear();
+        runs.extend(seq_runs);
+        Ok(Tracks(runs))
+    })?;
+    if all.len() != jobs.len() + seqs.len() {
+        anyhow::bail!(
+            "the cached tracking runs ({}) are not the {} this spec makes",
+            all.len(),
+            jobs.len() + seqs.len()
+        );
+    }
+    let (runs, seq_runs) = all.split_at(jobs.len());
+    let static_rows = runs
+        .iter()
+        .zip(&jobs)
+        .map(|((c, _, run), &(_, i))| static_row(c, targets[i], run, p.settle_degrees))
+        .collect();
     let sequence_rows = seq_runs
         .iter()
         .map(|(c, name, run)| {
@@ -305,8 +322,6 @@ pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
             }
         })
         .collect();
-    let mut all = runs;
-    all.extend(seq_runs);
     let mut lines = Vec::new();
     for (c, case, run) in &all {
         for ((&time, target), pose) in run.time.iter().zip(&run.target).zip(&run.pose) {
@@ -423,7 +438,7 @@ pub fn markdown(out: &Output, spec: &crate::spec::Spec) -> String {
     md
 }
 
-fn degrees_series(run: &Trajectory, axis: usize, pose: bool) -> Vec<(f64, f64)> {
+fn degrees_series(run: &Track, axis: usize, pose: bool) -> Vec<(f64, f64)> {
     run.time
         .iter()
         .zip(if pose { &run.pose } else { &run.target })
@@ -432,7 +447,7 @@ fn degrees_series(run: &Trajectory, axis: usize, pose: bool) -> Vec<(f64, f64)> 
 }
 
 /// Target (dashed) against achieved angles over time, one panel per axis.
-fn tracking_figure(path: &Path, title: &str, runs: &[(&str, &Trajectory)]) -> Result<()> {
+fn tracking_figure(path: &Path, title: &str, runs: &[(&str, &Track)]) -> Result<()> {
     let axes = ["pitch", "yaw", "roll"];
     let panels: Vec<Panel> = (0..3)
         .map(|a| Panel {
@@ -545,7 +560,7 @@ pub fn figures(
         format!("static {:.0} {:.0} {:.0}", -r[0], r[1], r[2]),
     ];
     for c in ["teacher", "learned"] {
-        let runs: Vec<(&str, &Trajectory)> = cases
+        let runs: Vec<(&str, &Track)> = cases
             .iter()
             .filter_map(|case| find(c, case).map(|t| (case.trim_start_matches("static "), t)))
             .collect();
@@ -555,7 +570,7 @@ pub fn figures(
             &runs,
         )?;
     }
-    let seq: Vec<(&str, &Trajectory)> = out
+    let seq: Vec<(&str, &Track)> = out
         .runs
         .iter()
         .filter(|r| !r.1.starts_with("static"))

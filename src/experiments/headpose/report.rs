@@ -1,7 +1,14 @@
-//! The head-neck experiment's CSV rows: its trajectories, still targets and sequences.
+//! The head-neck experiment's CSV rows: its trajectories, still targets and sequences, and
+//! the tracking runs as the cache keeps them.
+
+use anyhow::{bail, Result};
 
 use super::{SequenceRow, StaticRow};
+use crate::cache::Entry;
+use crate::experiments::stage::{text, Artifact};
 use crate::io::rows::{self, num, CsvRow};
+use crate::sim::geom::V3;
+use crate::sim::neck::{HeadPose, Trajectory};
 
 /// A line of `headpose_trajectories.csv`: one controller's head at one time of one case
 /// (degrees).
@@ -100,4 +107,123 @@ pub fn sequences_csv(rows: &[SequenceRow]) -> String {
         })
         .collect();
     rows::to_csv(&lines)
+}
+
+/// What the experiment keeps of a simulated run: each sample's time, target, head pose and
+/// the skull joint's offset from rest (the figure's face rides on it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Track {
+    pub time: Vec<f64>,
+    pub target: Vec<HeadPose>,
+    pub pose: Vec<HeadPose>,
+    pub skull_offset: Vec<V3>,
+}
+
+impl Track {
+    pub fn of(t: Trajectory) -> Track {
+        Track {
+            time: t.time,
+            target: t.target,
+            pose: t.pose,
+            skull_offset: t.skull_offset,
+        }
+    }
+}
+
+/// The tracking runs (controller, case, track), cached as `tracks.csv` with every number in
+/// its shortest round-trip form, so the tables and figures made from a cached copy have the
+/// same bytes.
+pub(super) struct Tracks(pub(super) Vec<(&'static str, String, Track)>);
+
+/// A line of `tracks.csv`: one sample of one run.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TrackLine {
+    run: usize,
+    controller: String,
+    case: String,
+    #[serde(serialize_with = "num::shortest")]
+    time: f64,
+    #[serde(with = "num::all")]
+    target: [f64; 3],
+    #[serde(with = "num::all")]
+    pose: [f64; 3],
+    #[serde(with = "num::all")]
+    skull_offset: [f64; 3],
+}
+
+impl CsvRow for TrackLine {
+    fn header() -> Vec<String> {
+        [
+            "run",
+            "controller",
+            "case",
+            "time",
+            "target_pitch",
+            "target_yaw",
+            "target_roll",
+            "pose_pitch",
+            "pose_yaw",
+            "pose_roll",
+            "skull_x",
+            "skull_y",
+            "skull_z",
+        ]
+        .map(String::from)
+        .into()
+    }
+}
+
+/// The controllers' names as the experiment spells them.
+const CONTROLLERS: [&str; 2] = ["teacher", "learned"];
+
+impl Artifact for Tracks {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        let mut lines = Vec::new();
+        for (run, (controller, case, t)) in self.0.iter().enumerate() {
+            for k in 0..t.time.len() {
+                lines.push(TrackLine {
+                    run,
+                    controller: controller.to_string(),
+                    case: case.clone(),
+                    time: t.time[k],
+                    target: t.target[k].to_array(),
+                    pose: t.pose[k].to_array(),
+                    skull_offset: t.skull_offset[k],
+                });
+            }
+        }
+        Ok(vec![(
+            "tracks.csv".into(),
+            rows::to_csv(&lines).into_bytes(),
+        )])
+    }
+
+    fn decode(entry: &Entry) -> Result<Self> {
+        let name = entry.path("tracks.csv").display().to_string();
+        let mut out: Vec<(usize, &'static str, String, Track)> = Vec::new();
+        for l in rows::from_csv::<TrackLine>(&text(entry, "tracks.csv")?, &name)? {
+            if out.last().is_none_or(|r| r.0 != l.run) {
+                let Some(controller) = CONTROLLERS.into_iter().find(|c| *c == l.controller) else {
+                    bail!("{name}: unknown controller `{}`", l.controller);
+                };
+                let empty = Track {
+                    time: Vec::new(),
+                    target: Vec::new(),
+                    pose: Vec::new(),
+                    skull_offset: Vec::new(),
+                };
+                out.push((l.run, controller, l.case.clone(), empty));
+            }
+            let t = &mut out.last_mut().expect("pushed above").3;
+            t.time.push(l.time);
+            t.target.push(HeadPose::from_array(l.target));
+            t.pose.push(HeadPose::from_array(l.pose));
+            t.skull_offset.push(l.skull_offset);
+        }
+        Ok(Tracks(
+            out.into_iter()
+                .map(|(_, c, case, t)| (c, case, t))
+                .collect(),
+        ))
+    }
 }

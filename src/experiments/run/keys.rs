@@ -296,8 +296,10 @@ pub(crate) fn plan(cell: &Cell, a: &Assets, cache: &Cache) -> Result<Vec<Planned
             Lookup::Hit(e) => Some(e.read("weights.safetensors")?),
             _ => None,
         };
+        let eval = headpose::eval_unit(spec, &train.key);
         add("headpose_data".into(), Ok(data));
         add("headpose_train".into(), Ok(train));
+        add("headpose_eval".into(), Ok(eval));
         if let Some(cohort_key) = &cohort_key {
             add(
                 "pose_transfer".into(),
