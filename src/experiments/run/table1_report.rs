@@ -315,3 +315,58 @@ pub(super) fn sweep_markdown(experiment: &str, rows: &[(String, Vec<Row>)]) -> S
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every committed sweep CSV is written again by `SweepLine` byte for byte (quoted cell
+    /// names, six-digit exponents), except that a cell name holding quotes (a string-valued
+    /// key, `dataset.family="broad"`) is now escaped as CSV requires: the files written before
+    /// left those quotes bare, which no CSV reader reads back as the name.
+    #[test]
+    fn committed_sweep_csvs_are_written_again_by_their_row_type() {
+        let results = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("results");
+        let mut seen = 0;
+        for experiment in std::fs::read_dir(&results).unwrap() {
+            let dir = experiment.unwrap().path();
+            let name = dir.file_name().unwrap().to_string_lossy().to_string();
+            let csv = dir.join("latest").join(format!("{name}.csv"));
+            let Ok(text) = std::fs::read_to_string(&csv) else {
+                continue;
+            };
+            // A sweep's summary (a single-cell experiment may have a file of its name too).
+            if text.lines().next() != Some(SweepLine::header().join(",").as_str()) {
+                continue;
+            }
+            for line in text.lines().skip(1) {
+                // `"<cell name>",mean,ci95,per_expression_mean`, read by hand: the name may
+                // hold bare quotes.
+                let mut parts = line.rsplitn(4, ',');
+                let mut num = || parts.next().unwrap().parse::<f64>().unwrap();
+                let (per, ci, mean) = (num(), num(), num());
+                let quoted = parts.next().unwrap();
+                let cell = quoted[1..quoted.len() - 1].to_string();
+                let row = SweepLine {
+                    cell: cell.clone(),
+                    mse_all_mean: mean,
+                    mse_all_ci95: ci,
+                    mse_per_expression_mean: per,
+                };
+                let written = rows::to_csv(std::slice::from_ref(&row));
+                let escaped = format!("\"{}\"", cell.replace('"', "\"\""));
+                let expected = line.replacen(quoted, &escaped, 1);
+                assert_eq!(
+                    written.lines().nth(1),
+                    Some(expected.as_str()),
+                    "{}",
+                    csv.display()
+                );
+                let back: Vec<SweepLine> = rows::from_csv(&written, "w.csv").unwrap();
+                assert_eq!(back[0].cell, cell);
+            }
+            seen += 1;
+        }
+        assert!(seen >= 8, "only {seen} committed sweeps");
+    }
+}
