@@ -191,6 +191,27 @@ impl Progress {
     }
 }
 
+/// Computes a unit's artifact and stores it, saying so (as `name`) unless quiet; returns it
+/// with the seconds it took.
+fn store<T: Artifact>(
+    cache: &Cache,
+    name: &str,
+    unit: &Unit,
+    compute: impl FnOnce() -> Result<T>,
+) -> Result<(T, f64)> {
+    let t = Instant::now();
+    if verbosity() != Verbosity::Quiet {
+        eprintln!("{name}: computing");
+    }
+    let value = compute()?;
+    cache.put(unit.stage, &unit.key, &value.encode()?)?;
+    let seconds = t.elapsed().as_secs_f64();
+    if verbosity() != Verbosity::Quiet {
+        eprintln!("{name}: done in {}", duration(seconds));
+    }
+    Ok((value, seconds))
+}
+
 /// "42 s", "3 min 20 s", "1 h 05 min".
 pub fn duration(seconds: f64) -> String {
     let s = seconds.max(0.0).round() as u64;
@@ -236,32 +257,13 @@ impl<'a> Stages<'a> {
         compute: impl FnOnce(&mut Self) -> Result<T>,
     ) -> Result<T> {
         let t = Instant::now();
-        let name = self.name(unit);
-        let found = self.cache.get(unit.stage, &unit.key)?;
-        if let Lookup::Damaged { dir, reason } = &found {
-            eprintln!(
-                "{name}: the cached entry {} is damaged ({reason}); recomputing",
-                dir.display()
-            );
-        }
-        if let Lookup::Hit(entry) = found {
-            let value = T::decode(&entry)
-                .with_context(|| format!("the cached {} in {}", unit.stage, entry.dir.display()))?;
-            if verbosity() == Verbosity::Verbose {
-                eprintln!("{name}: cached");
-            }
-            self.record(unit, true, t);
+        if let Some(value) = self.lookup(unit)? {
+            self.record(unit, true, t.elapsed().as_secs_f64());
             return Ok(value);
         }
-        if verbosity() != Verbosity::Quiet {
-            eprintln!("{name}: computing");
-        }
-        let value = compute(self)?;
-        self.cache.put(unit.stage, &unit.key, &value.encode()?)?;
-        if verbosity() != Verbosity::Quiet {
-            eprintln!("{name}: done in {}", duration(t.elapsed().as_secs_f64()));
-        }
-        self.record(unit, false, t);
+        let name = self.name(unit);
+        let (value, seconds) = store(self.cache, &name, unit, || compute(self))?;
+        self.record(unit, false, seconds);
         Ok(value)
     }
 
@@ -278,84 +280,61 @@ impl<'a> Stages<'a> {
         let mut found: Vec<Option<(T, f64)>> = Vec::with_capacity(units.len());
         for unit in units {
             let t = Instant::now();
-            let name = self.name(unit);
-            match self.cache.get(unit.stage, &unit.key)? {
-                Lookup::Hit(entry) => {
-                    let value = T::decode(&entry).with_context(|| {
-                        format!("the cached {} in {}", unit.stage, entry.dir.display())
-                    })?;
-                    if verbosity() == Verbosity::Verbose {
-                        eprintln!("{name}: cached");
-                    }
-                    found.push(Some((value, t.elapsed().as_secs_f64())));
-                }
-                Lookup::Damaged { dir, reason } => {
-                    eprintln!(
-                        "{name}: the cached entry {} is damaged ({reason}); recomputing",
-                        dir.display()
-                    );
-                    found.push(None);
-                }
-                Lookup::Missing => found.push(None),
-            }
+            found.push(self.lookup(unit)?.map(|v| (v, t.elapsed().as_secs_f64())));
         }
-        let missing: Vec<usize> = (0..units.len()).filter(|&i| found[i].is_none()).collect();
+        let hits: Vec<bool> = found.iter().map(Option::is_some).collect();
+        let missing: Vec<usize> = (0..units.len()).filter(|&i| !hits[i]).collect();
         let names: Vec<String> = units.iter().map(|u| self.name(u)).collect();
         let cache = self.cache;
-        let computed: Vec<(usize, T, f64)> = missing
+        let computed: Vec<(usize, (T, f64))> = missing
             .par_iter()
-            .map(|&i| {
-                let (unit, t) = (&units[i], Instant::now());
-                if verbosity() != Verbosity::Quiet {
-                    eprintln!("{}: computing", names[i]);
-                }
-                let value = compute(i)?;
-                cache.put(unit.stage, &unit.key, &value.encode()?)?;
-                let seconds = t.elapsed().as_secs_f64();
-                if verbosity() != Verbosity::Quiet {
-                    eprintln!("{}: done in {}", names[i], duration(seconds));
-                }
-                Ok((i, value, seconds))
-            })
+            .map(|&i| Ok((i, store(cache, &names[i], &units[i], || compute(i))?)))
             .collect::<Result<_>>()?;
-        let mut computed: Vec<Option<(T, f64)>> = {
-            let mut slots: Vec<Option<(T, f64)>> = (0..units.len()).map(|_| None).collect();
-            for (i, value, seconds) in computed {
-                slots[i] = Some((value, seconds));
-            }
-            slots
-        };
+        for (i, done) in computed {
+            found[i] = Some(done);
+        }
         let mut out = Vec::with_capacity(units.len());
-        for (i, unit) in units.iter().enumerate() {
-            let (hit, (value, seconds)) = match found[i].take() {
-                Some(v) => (true, v),
-                None => (
-                    false,
-                    computed[i]
-                        .take()
-                        .context("every missing unit is computed")?,
-                ),
-            };
-            self.records.push(StageRecord {
-                cell: self.cell.clone(),
-                stage: unit.stage.to_string(),
-                key: unit.key.clone(),
-                hit,
-                seconds,
-            });
+        for ((unit, hit), slot) in units.iter().zip(hits).zip(found) {
+            let (value, seconds) = slot.context("every missing unit is computed")?;
+            self.record(unit, hit, seconds);
             out.push(value);
         }
         Ok(out)
     }
 
+    /// The unit's artifact if the cache holds a complete entry; a damaged entry is named (it
+    /// will be recomputed).
+    fn lookup<T: Artifact>(&self, unit: &Unit) -> Result<Option<T>> {
+        let name = self.name(unit);
+        match self.cache.get(unit.stage, &unit.key)? {
+            Lookup::Hit(entry) => {
+                let value = T::decode(&entry).with_context(|| {
+                    format!("the cached {} in {}", unit.stage, entry.dir.display())
+                })?;
+                if verbosity() == Verbosity::Verbose {
+                    eprintln!("{name}: cached");
+                }
+                Ok(Some(value))
+            }
+            Lookup::Damaged { dir, reason } => {
+                eprintln!(
+                    "{name}: the cached entry {} is damaged ({reason}); recomputing",
+                    dir.display()
+                );
+                Ok(None)
+            }
+            Lookup::Missing => Ok(None),
+        }
+    }
+
     /// Records what a unit did (a cache hit or a computation) and how long it took.
-    fn record(&mut self, unit: &Unit, hit: bool, since: Instant) {
+    fn record(&mut self, unit: &Unit, hit: bool, seconds: f64) {
         self.records.push(StageRecord {
             cell: self.cell.clone(),
             stage: unit.stage.to_string(),
             key: unit.key.clone(),
             hit,
-            seconds: since.elapsed().as_secs_f64(),
+            seconds,
         });
     }
 

@@ -158,16 +158,37 @@ pub mod num {
         s.collect_str(v)
     }
 
+    /// Each element of a list, one cell each, as `text` writes it.
+    fn each<S: Serializer>(
+        v: &[f64],
+        s: S,
+        text: impl Fn(f64) -> String,
+    ) -> Result<S::Ok, S::Error> {
+        let mut t = s.serialize_tuple(v.len())?;
+        for &x in v {
+            t.serialize_element(&text(x))?;
+        }
+        t.end()
+    }
+
+    /// A number as `text` writes it, or an empty cell for none.
+    fn or_empty<S: Serializer>(
+        v: &Option<f64>,
+        s: S,
+        text: impl Fn(f64) -> String,
+    ) -> Result<S::Ok, S::Error> {
+        match v {
+            Some(v) => s.serialize_str(&text(*v)),
+            None => s.serialize_none(),
+        }
+    }
+
     /// `shortest` for each element of an array.
     pub fn shortest_all<S: Serializer, const N: usize>(
         v: &[f64; N],
         s: S,
     ) -> Result<S::Ok, S::Error> {
-        let mut t = s.serialize_tuple(N)?;
-        for x in v {
-            t.serialize_element(&x.to_string())?;
-        }
-        t.end()
+        each(v, s, |x| x.to_string())
     }
 
     /// `shortest` for each element of an array, read back as an array of any length
@@ -199,15 +220,6 @@ pub mod num {
         }
     }
 
-    /// `shortest` for each element of a list.
-    pub fn shortest_each<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
-        let mut t = s.serialize_tuple(v.len())?;
-        for x in v {
-            t.serialize_element(&x.to_string())?;
-        }
-        t.end()
-    }
-
     /// `D` digits after the point.
     pub fn fixed<const D: usize, S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
         s.collect_str(&format_args!("{v:.D$}"))
@@ -218,10 +230,7 @@ pub mod num {
         v: &Option<f64>,
         s: S,
     ) -> Result<S::Ok, S::Error> {
-        match v {
-            Some(v) => s.collect_str(&format_args!("{v:.D$}")),
-            None => s.serialize_none(),
-        }
+        or_empty(v, s, |x| format!("{x:.D$}"))
     }
 
     /// `sci`, or an empty cell for none.
@@ -229,19 +238,12 @@ pub mod num {
         v: &Option<f64>,
         s: S,
     ) -> Result<S::Ok, S::Error> {
-        match v {
-            Some(v) => s.collect_str(&format_args!("{v:.D$e}")),
-            None => s.serialize_none(),
-        }
+        or_empty(v, s, |x| format!("{x:.D$e}"))
     }
 
     /// `fixed` for each element of a list.
     pub fn fixed_each<const D: usize, S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
-        let mut t = s.serialize_tuple(v.len())?;
-        for x in v {
-            t.serialize_element(&format!("{x:.D$}"))?;
-        }
-        t.end()
+        each(v, s, |x| format!("{x:.D$}"))
     }
 
     /// Exponent notation with `D` digits after the point.
@@ -251,11 +253,7 @@ pub mod num {
 
     /// `sci` for each element of a list.
     pub fn sci_each<const D: usize, S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
-        let mut t = s.serialize_tuple(v.len())?;
-        for x in v {
-            t.serialize_element(&format!("{x:.D$e}"))?;
-        }
-        t.end()
+        each(v, s, |x| format!("{x:.D$e}"))
     }
 }
 
