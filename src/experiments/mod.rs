@@ -1,6 +1,7 @@
 //! The harness: commands that put the simulator, the observer and the reports together.
 
 pub mod bench;
+pub mod cell;
 pub mod editing;
 pub mod face;
 pub mod headpose;
@@ -16,3 +17,40 @@ pub mod table1;
 pub mod table2;
 pub mod table2_stage;
 pub mod transfer;
+
+use cell::Experiment;
+
+/// Every experiment a run can hold, in the order a cell runs them: an experiment comes after
+/// those whose products it reads (the inversion and the pose transfer read Table 2's cohorts,
+/// the pose transfer the head-neck experiment's voluntary network). A new experiment is a
+/// new file and a line here.
+pub(crate) const EXPERIMENTS: &[&dyn Experiment] = &[
+    &headpose::Headpose,
+    &table1::Table1,
+    &table2_stage::Table2,
+    &inversion::Inversion,
+    &pose_transfer::PoseTransfer,
+    &realfaces::Realfaces,
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A table a spec may list runs: every name `spec` accepts is one experiment's.
+    #[test]
+    fn every_table_a_spec_accepts_is_one_registered_experiment() {
+        for table in crate::spec::resolve::TABLES {
+            let n = EXPERIMENTS.iter().filter(|e| e.name() == table).count();
+            assert_eq!(n, 1, "{table}: {n} experiments");
+        }
+        let mut names: Vec<&str> = EXPERIMENTS.iter().map(|e| e.name()).collect();
+        names.sort();
+        names.dedup();
+        assert_eq!(
+            names.len(),
+            EXPERIMENTS.len(),
+            "two experiments share a name"
+        );
+    }
+}

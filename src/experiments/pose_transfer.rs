@@ -9,16 +9,20 @@
 //!
 //! The error of a frame is the angle of the rotation between the target and achieved poses.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 
 use super::table2::RefFrame;
 use super::transfer::follow;
-use crate::cache::Entry;
+use crate::cache::{Entry, Lookup};
 use crate::cohort::{CohortKind, CohortParams};
+use crate::experiments::cell::{CellRun, Experiment, Plan};
+use crate::experiments::headpose::{self, VoluntaryWeights};
 use crate::experiments::stage::{text, Artifact, Stages, Unit};
+use crate::experiments::table2_stage::{cohort_unit, Table2Result};
 use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Mlp;
+use crate::report::table::{Table, TableRow};
 use crate::sim::neck::{HeadPose, Neck, PoseSequence};
 
 /// Bump when the evaluation changes meaning.
@@ -194,15 +198,22 @@ pub fn markdown(rows: &[PoseRow]) -> String {
          (`voluntary.safetensors`). Images: each pose a still, held from upright rest until \
          the head settles (it turns less than 0.05 deg in 0.5 s). Videos: each clip followed \
          at its frame rate from the posture that holds its first pose. Error: the angle of the \
-         rotation from the target to the achieved pose (deg); target: the angle from upright.\n\n\
-         | cohort | frames | mean target turn (deg) | mean error (deg) | RMS error (deg) | max error (deg) |\n\
-         |---|---|---|---|---|---|\n",
+         rotation from the target to the achieved pose (deg); target: the angle from upright.\n\n",
     );
+    let mut t = Table::labelled(&[
+        "cohort",
+        "frames",
+        "mean target turn (deg)",
+        "mean error (deg)",
+        "RMS error (deg)",
+        "max error (deg)",
+    ]);
     for r in rows {
         let mut c = cells(r, 2);
         c[0] = c[0].replace('_', " ");
-        out.push_str(&format!("| {} |\n", c.join(" | ")));
+        t.push(TableRow::new(c.into()));
     }
+    out.push_str(&t.markdown());
     out
 }
 
@@ -234,6 +245,59 @@ impl Artifact for Errors {
         let name = entry.path("errors.csv").display().to_string();
         let lines: Vec<ErrorLine> = rows::from_csv(&text(entry, "errors.csv")?, &name)?;
         Ok(Errors(lines.into_iter().map(|l| l.error_deg).collect()))
+    }
+}
+
+/// The head pose of Table 2's cohorts in the registry: run where the spec lists both
+/// "table2" and "headpose" (both run before it).
+pub(crate) struct PoseTransfer;
+
+impl Experiment for PoseTransfer {
+    fn name(&self) -> &'static str {
+        "pose_transfer"
+    }
+
+    fn wanted(&self, spec: &crate::spec::Spec) -> bool {
+        ["table2", "headpose"]
+            .iter()
+            .all(|n| spec.tables.iter().any(|t| t == n))
+    }
+
+    fn plan(&self, plan: &mut Plan) -> Result<()> {
+        let (spec, a) = (plan.spec, plan.assets);
+        let cohort = cohort_unit(spec, &a.face, &a.data(spec)?);
+        let train = headpose::train_unit(spec, &headpose::data_unit(spec).key);
+        match plan.cache.inspect(train.stage, &train.key) {
+            Lookup::Hit(e) => {
+                let u = unit(spec, &cohort.key, &e.read("weights.safetensors")?);
+                plan.add("pose_transfer", u);
+            }
+            _ => plan.waiting(
+                "pose_transfer",
+                "its key needs the voluntary network (headpose_train)",
+            ),
+        }
+        Ok(())
+    }
+
+    fn run(&self, cx: &mut CellRun) -> Result<()> {
+        let (t2, weights) = (
+            cx.products.get::<Table2Result>(),
+            cx.products.get::<VoluntaryWeights>(),
+        );
+        let (Some(t2), Some(weights)) = (t2, weights) else {
+            bail!("the pose transfer needs Table 2's cohorts and the voluntary network");
+        };
+        let spec = cx.spec;
+        let rows = stage(
+            spec,
+            &mut cx.stages(),
+            &t2.cohort_key,
+            &weights.0,
+            &t2.reference,
+        )?;
+        cx.output("table2_pose.csv", csv(&rows))?;
+        cx.table("table2_pose.md", &markdown(&rows))
     }
 }
 

@@ -16,12 +16,14 @@ use anyhow::{bail, Context, Result};
 use super::table2::{range_map, training_range, transfer, Setting};
 use crate::cache::{self, Entry};
 use crate::dataset::reader::FaceReader;
+use crate::experiments::cell::{spec_calibration, CellRun, Experiment, Plan, Sweep};
 use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::io::openface::read_openface;
 use crate::io::realdata::RealInput;
 use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Mlp;
 use crate::observe::{Observer, AU_COUNT, AU_NAMES};
+use crate::report::table::{Table, TableRow};
 use crate::sim::basis::LinearBasis;
 use crate::sim::{FaceModel, SolveParams};
 use crate::spec::Spec;
@@ -139,6 +141,96 @@ pub fn unit(
         ),
         &deps,
     )
+}
+
+/// The real-data table in the registry.
+pub(crate) struct Realfaces;
+
+/// A cell's real-data rows, for the sweep's summary.
+struct RealfacesRows(Vec<FileRow>);
+
+impl Experiment for Realfaces {
+    fn name(&self) -> &'static str {
+        "realfaces"
+    }
+
+    fn plan(&self, plan: &mut Plan) -> Result<()> {
+        match crate::io::realdata::inputs(&plan.spec.realfaces) {
+            Ok(files) => plan_files(plan, "realfaces", &files),
+            Err(e) => {
+                plan.waiting("realfaces", e.to_string());
+                Ok(())
+            }
+        }
+    }
+
+    fn run(&self, cx: &mut CellRun) -> Result<()> {
+        let files = crate::io::realdata::inputs(&cx.spec.realfaces)?;
+        let rows = through_networks(cx, &files)?;
+        cx.output("realfaces.csv", csv(&rows))?;
+        cx.table("realfaces.md", &markdown(&rows, cx.spec))?;
+        cx.products.put(RealfacesRows(rows));
+        Ok(())
+    }
+
+    fn sweep(&self, sweep: &mut Sweep) -> Result<()> {
+        let cells: Vec<(String, Vec<FileRow>)> = sweep
+            .each::<RealfacesRows>()
+            .into_iter()
+            .map(|(name, r)| (name, r.0.clone()))
+            .collect();
+        if !cells.is_empty() {
+            sweep.markdown.push_str(&sweep_markdown(&cells));
+        }
+        Ok(())
+    }
+}
+
+/// Real OpenFace files through every seed's unified network of the cell (the real-data table,
+/// and the committed file Table 2 reports beside its cohorts).
+pub(crate) fn through_networks(cx: &mut CellRun, files: &[RealInput]) -> Result<Vec<FileRow>> {
+    let spec = cx.spec;
+    let (n, k, model, basis) = (cx.networks()?, cx.keys()?, cx.model()?, cx.basis()?);
+    let reader = FaceReader::new(spec.observer_source)?;
+    let observer = reader.observer(&model, spec_calibration(spec)?)?;
+    let training = n.training_aus();
+    let inputs = Inputs {
+        spec,
+        files,
+        dataset_key: &k.dataset,
+        basis_key: k.basis.as_deref(),
+        unified: n.unified(&k),
+        training_aus: &training,
+        model: &model,
+        basis: basis.as_ref().as_ref(),
+        reader: &reader,
+        observer: &observer,
+    };
+    run(&inputs, &mut cx.stages())
+}
+
+/// The units of `files` through every seed's unified network, labelled `label seed N`.
+pub(crate) fn plan_files(plan: &mut Plan, label: &str, files: &[RealInput]) -> Result<()> {
+    let content = content(files)?;
+    let k = plan.keys();
+    let units: Vec<(String, Unit)> = k
+        .unified()
+        .into_iter()
+        .map(|(seed, train_key)| {
+            let u = unit(
+                plan.spec,
+                &content,
+                train_key,
+                &k.dataset,
+                k.basis.as_deref(),
+            );
+            (format!("{label} seed {seed}"), u)
+        })
+        .collect();
+    for (label, u) in units {
+        plan.add(label, u);
+    }
+    Ok(())
 }
 
 /// Transfers every file in both settings for every seed (cached per seed).
@@ -389,95 +481,81 @@ pub fn markdown(rows: &[FileRow], spec: &Spec) -> String {
          in the file) transfers to AU12 within 0.5.\n\n"
     ));
     md.push_str(&format!("## Per file (seed {first})\n\n"));
-    md.push_str(
-        "| file | person | setting | frames (skipped) | mean MSE | worst AU (MSE) | AUs > 0.03 \
-         | smile frames, AU12 abs. error | brow-raise frames, AU01 / AU02 abs. error |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
-    );
+    let mut t = Table::labelled(&[
+        "file",
+        "person",
+        "setting",
+        "frames (skipped)",
+        "mean MSE",
+        "worst AU (MSE)",
+        "AUs > 0.03",
+        "smile frames, AU12 abs. error",
+        "brow-raise frames, AU01 / AU02 abs. error",
+    ]);
     for r in rows.iter().filter(|r| r.seed == first) {
         let worst = (0..AU_COUNT)
             .max_by(|&a, &b| r.mse[a].total_cmp(&r.mse[b]))
             .expect("17 AUs");
-        md.push_str(&format!(
-            "| {} | {} | {} | {} ({}) | {} | {} ({}) | {} | {}, {} | {}, {} / {} |\n",
-            r.file,
-            r.person,
-            r.setting.name(),
-            r.frames,
-            r.skipped,
+        t.push(TableRow::new(vec![
+            r.file.clone(),
+            r.person.clone(),
+            r.setting.name().to_string(),
+            format!("{} ({})", r.frames, r.skipped),
             f4(r.mean()),
-            AU_NAMES[worst],
-            f4(r.mse[worst]),
-            r.mse.iter().filter(|&&m| m > 0.03).count(),
-            r.smile.0,
-            f2(r.smile.1),
-            r.brow.0,
-            f2(r.brow.1),
-            f2(r.brow.2),
-        ));
+            format!("{} ({})", AU_NAMES[worst], f4(r.mse[worst])),
+            r.mse.iter().filter(|&&m| m > 0.03).count().to_string(),
+            format!("{}, {}", r.smile.0, f2(r.smile.1)),
+            format!("{}, {} / {}", r.brow.0, f2(r.brow.1), f2(r.brow.2)),
+        ]));
     }
+    md.push_str(&t.markdown());
     md.push_str(&format!(
-        "\n## Per AU, pooled over the files (frame-weighted, seed{} {})\n\n| setting | mean |",
+        "\n## Per AU, pooled over the files (frame-weighted, seed{} {})\n\n",
         if seeds.len() > 1 { "s" } else { "" },
         seeds.join(", ")
     ));
-    for a in AU_NAMES {
-        md.push_str(&format!(" {a} |"));
-    }
-    md.push_str("\n|---|---|");
-    md.push_str(&"---|".repeat(AU_COUNT));
-    md.push('\n');
+    let header: Vec<&str> = ["setting", "mean"].into_iter().chain(AU_NAMES).collect();
+    let mut t = Table::labelled(&header);
     for setting in Setting::ALL {
         let of: Vec<&FileRow> = rows.iter().filter(|r| r.setting == setting).collect();
         let p = pooled(&of);
-        md.push_str(&format!(
-            "| {} | {} |",
-            setting.name(),
-            f4(crate::stats::mean(&p))
-        ));
-        for v in p {
-            md.push_str(&format!(" {} |", f4(v)));
-        }
-        md.push('\n');
+        let cells = [setting.name().to_string(), f4(crate::stats::mean(&p))];
+        t.push(TableRow::new(cells.into_iter().chain(p.map(f4)).collect()));
     }
+    md.push_str(&t.markdown());
     md
 }
 
 /// A sweep's real-data comparison (e.g. the family ablation): per file and setting, each
 /// cell's mean MSE (first seed), then the pooled mean per cell.
 pub fn sweep_markdown(cells: &[(String, Vec<FileRow>)]) -> String {
-    let mut md =
-        String::from("\n## Real faces: mean AU MSE per file (first seed)\n\n| file | setting |");
-    for (name, _) in cells {
-        md.push_str(&format!(" {name} |"));
-    }
-    md.push_str("\n|---|---|");
-    md.push_str(&"---|".repeat(cells.len()));
-    md.push('\n');
+    let md = String::from("\n## Real faces: mean AU MSE per file (first seed)\n\n");
+    let names = cells.iter().map(|(name, _)| name.as_str());
+    let header: Vec<&str> = ["file", "setting"].into_iter().chain(names).collect();
+    let mut t = Table::labelled(&header);
     let Some((_, first)) = cells.first() else {
-        return md;
+        return md + &t.markdown();
     };
     let seed = first.first().map(|r| r.seed).unwrap_or(1);
     for r in first.iter().filter(|r| r.seed == seed) {
-        md.push_str(&format!("| {} | {} |", r.file, r.setting.name()));
-        for (_, rows) in cells {
+        let means = cells.iter().map(|(_, rows)| {
             let v = rows
                 .iter()
                 .find(|x| x.seed == seed && x.file == r.file && x.setting == r.setting)
                 .map(FileRow::mean)
                 .unwrap_or(f64::NAN);
-            md.push_str(&format!(" {} |", f4(v)));
-        }
-        md.push('\n');
+            f4(v)
+        });
+        let label = [r.file.clone(), r.setting.name().to_string()];
+        t.push(TableRow::new(label.into_iter().chain(means).collect()));
     }
     for setting in Setting::ALL {
-        md.push_str(&format!("| pooled | {} |", setting.name()));
-        for (_, rows) in cells {
+        let means = cells.iter().map(|(_, rows)| {
             let of: Vec<&FileRow> = rows.iter().filter(|r| r.setting == setting).collect();
-            let p = pooled(&of);
-            md.push_str(&format!(" {} |", f4(crate::stats::mean(&p))));
-        }
-        md.push('\n');
+            f4(crate::stats::mean(&pooled(&of)))
+        });
+        let label = ["pooled".to_string(), setting.name().to_string()];
+        t.push(TableRow::new(label.into_iter().chain(means).collect()));
     }
-    md
+    md + &t.markdown()
 }

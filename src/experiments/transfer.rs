@@ -173,7 +173,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
 
     let source = FaceSource::of_spec(&spec);
     let model = source.model()?;
-    let observer = model_observer(&model, super::run::spec_calibration(&spec)?)?;
+    let observer = model_observer(&model, super::cell::spec_calibration(&spec)?)?;
     let params = SolveParams {
         tolerance: spec.dataset.tolerance,
         ..SolveParams::default()
@@ -567,7 +567,7 @@ pub fn transfer_path(
         }
     }
     let model = FaceSource::of_spec(&spec).model()?;
-    let calibration = super::run::spec_calibration(&spec)?;
+    let calibration = super::cell::spec_calibration(&spec)?;
     let mut landmarked = landmark_files(input, &opts.out, &model, calibration, neutral)?;
     let opts = TransferOptions {
         openface: landmarked.openface.clone(),

@@ -46,6 +46,11 @@ impl Table {
         }
     }
 
+    /// A table with the header `names`.
+    pub fn labelled(names: &[&str]) -> Table {
+        Table::new(names.iter().map(|n| n.to_string()).collect())
+    }
+
     pub fn push(&mut self, row: TableRow) {
         self.rows.push(row);
     }

@@ -9,11 +9,10 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use crate::cache::Entry;
-use crate::experiments::run::Trained;
+use crate::experiments::cell::{self, CellRun, Experiment, Plan, Trained};
 use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::headneck::{
     dataset, face_motion, posed_face, sequences, static_targets, Learned, INPUTS, OUTPUTS,
-    STRAIN_SCALE,
 };
 use crate::io::rows;
 use crate::learn::mlp::{train, Curves, Pairs};
@@ -25,7 +24,7 @@ use crate::sim::neck::{simulate, BodyState, HeadPose, Neck, PoseSequence, Teache
 use crate::sim::FaceModel;
 
 mod report;
-pub use report::{sequences_csv, static_csv};
+pub use report::{markdown, sequences_csv, static_csv};
 use report::{Track, Tracks, TrajectoryLine};
 
 /// Bump when the data, training or evaluation change meaning. 5: the teacher's projected
@@ -204,6 +203,49 @@ pub fn train_unit(spec: &crate::spec::Spec, data_key: &str) -> Unit {
     Unit::new("headpose_train", HEADPOSE_VERSION, &inputs, &[data_key])
 }
 
+/// The head-neck experiment in the registry: its three cached stages, its CSVs and the
+/// voluntary network in the run folder, its table and figures.
+pub(crate) struct Headpose;
+
+/// The voluntary neck network of a cell (safetensors), for the pose transfer.
+pub(crate) struct VoluntaryWeights(pub(crate) Vec<u8>);
+
+impl Experiment for Headpose {
+    fn name(&self) -> &'static str {
+        "headpose"
+    }
+
+    fn trains(&self) -> bool {
+        false
+    }
+
+    fn plan(&self, plan: &mut Plan) -> Result<()> {
+        let data = data_unit(plan.spec);
+        let train = train_unit(plan.spec, &data.key);
+        let eval = eval_unit(plan.spec, &train.key);
+        plan.add("headpose_data", data);
+        plan.add("headpose_train", train);
+        plan.add("headpose_eval", eval);
+        Ok(())
+    }
+
+    fn run(&self, cx: &mut CellRun) -> Result<()> {
+        let spec = cx.spec;
+        let out = stage(spec, &mut cx.stages())?;
+        cx.output("headpose_static.csv", static_csv(&out.static_rows))?;
+        cx.output("headpose_sequences.csv", sequences_csv(&out.sequence_rows))?;
+        cx.output("headpose_trajectories.csv", out.trajectories_csv.clone())?;
+        cx.output("headpose_curves.csv", cell::curves_csv(&out.curves))?;
+        cx.output("voluntary.safetensors", out.weights.clone())?;
+        cx.table("headpose.md", &markdown(&out, spec))?;
+        if let Some(dir) = cx.figures("headpose") {
+            figures(&dir, &out, spec, &*cx.model()?)?;
+        }
+        cx.products.put(VoluntaryWeights(out.weights));
+        Ok(())
+    }
+}
+
 /// Dataset and training (cached), then the evaluation.
 pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
     let p = &spec.headpose;
@@ -350,92 +392,6 @@ pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
         weights: mlp.to_safetensors()?,
         runs: all,
     })
-}
-
-fn opt(v: Option<f64>) -> String {
-    v.map_or("never".into(), |v| format!("{v:.2}"))
-}
-
-/// `paper-tables/headpose.md`.
-pub fn markdown(out: &Output, spec: &crate::spec::Spec) -> String {
-    let p = &spec.headpose;
-    let mut md = String::from("# Head pose control (paper 3.1, 5.3)\n\n");
-    md.push_str(&format!(
-        "Static targets: every combination of pitch {{-{0}, 0, {0}}}, yaw {{-{1}, 0, {1}}}, roll \
-         {{-{2}, 0, {2}}} degrees, each simulated {3} s from the upright rest posture at 4 kHz with \
-         the voluntary controller at 25 Hz and the reflex at every step. Final error: mean angle \
-         between achieved and target skull orientation over the last 0.25 s. Settling time: when the \
-         error last entered the {4}-degree band.\n\n",
-        p.range_degrees[0], p.range_degrees[1], p.range_degrees[2], p.duration, p.settle_degrees
-    ));
-    md.push_str("| controller | targets | within band at the end | mean final error (deg) | max final error (deg) | mean settling time (s) | max settling time (s) |\n|---|---|---|---|---|---|---|\n");
-    for c in ["teacher", "learned"] {
-        let rows: Vec<&StaticRow> = out
-            .static_rows
-            .iter()
-            .filter(|r| r.controller == c)
-            .collect();
-        let n = rows.len().max(1) as f64;
-        let within = rows
-            .iter()
-            .filter(|r| r.late_max_error < p.settle_degrees)
-            .count();
-        let settled: Vec<f64> = rows.iter().filter_map(|r| r.settling_time).collect();
-        let all_settled = settled.len() == rows.len();
-        md.push_str(&format!(
-            "| {c} | {} | {within} | {:.2} | {:.2} | {:.2} | {} |\n",
-            rows.len(),
-            rows.iter().map(|r| r.final_error).sum::<f64>() / n,
-            rows.iter().map(|r| r.final_error).fold(0.0, f64::max),
-            crate::stats::mean_or_zero(&settled),
-            if all_settled {
-                format!("{:.2}", settled.iter().copied().fold(0.0, f64::max))
-            } else {
-                "never (some)".into()
-            },
-        ));
-    }
-    md.push_str("\nPer target (learned controller):\n\n| pitch | yaw | roll | final error (deg) | settling time (s) |\n|---|---|---|---|---|\n");
-    for r in out.static_rows.iter().filter(|r| r.controller == "learned") {
-        let t = r.target.degrees();
-        md.push_str(&format!(
-            "| {:.0} | {:.0} | {:.0} | {:.2} | {} |\n",
-            t[0],
-            t[1],
-            t[2],
-            r.final_error,
-            opt(r.settling_time)
-        ));
-    }
-    md.push_str("\nPose sequences (30 fps targets, learned controller; errors after the first 0.5 s):\n\n| sequence | RMS error (deg) | max error (deg) |\n|---|---|---|\n");
-    for r in &out.sequence_rows {
-        md.push_str(&format!(
-            "| {} | {:.2} | {:.2} |\n",
-            r.name, r.rms_error, r.max_error
-        ));
-    }
-    let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
-    md.push_str(&format!(
-        "\nVoluntary network: {INPUTS} inputs (pose, angular velocity, target) -> {} x {} ReLU -> {OUTPUTS} \
-         outputs (72 activations, 72 strains x {STRAIN_SCALE}, 72 strain rates), Adam lr {}, {} epochs; \
-         {} training and {} test pairs from {} equilibrium fits ({} missed by more than 0.5 deg); \
-         final train MSE {:.2e}, test MSE {:.2e}.\n",
-        p.model.layers,
-        p.model.width,
-        p.train.learning_rate,
-        p.train.epochs,
-        out.pairs.0,
-        out.pairs.1,
-        p.fit_targets,
-        out.missed_fits,
-        last(&out.curves.train),
-        last(&out.curves.test),
-    ));
-    md.push_str(&format!(
-        "\nSeeds: headpose.seed = {}. Reproduce: `cargo run --release -- run experiments/headpose.toml`.\n",
-        p.seed
-    ));
-    md
 }
 
 fn degrees_series(run: &Track, axis: usize, pose: bool) -> Vec<(f64, f64)> {

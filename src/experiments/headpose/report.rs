@@ -1,12 +1,14 @@
-//! The head-neck experiment's CSV rows: its trajectories, still targets and sequences, and
+//! The head-neck experiment's report (`paper-tables/headpose.md`) and CSV rows: its trajectories, still targets and sequences, and
 //! the tracking runs as the cache keeps them.
 
 use anyhow::{bail, Result};
 
-use super::{SequenceRow, StaticRow};
+use super::{Output, SequenceRow, StaticRow};
 use crate::cache::Entry;
 use crate::experiments::stage::{text, Artifact};
+use crate::headneck::{INPUTS, OUTPUTS, STRAIN_SCALE};
 use crate::io::rows::{self, num, CsvRow};
+use crate::report::table::{Table, TableRow};
 use crate::sim::geom::V3;
 use crate::sim::neck::{HeadPose, Trajectory};
 
@@ -226,4 +228,118 @@ impl Artifact for Tracks {
                 .collect(),
         ))
     }
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or("never".into(), |v| format!("{v:.2}"))
+}
+
+/// `paper-tables/headpose.md`.
+pub fn markdown(out: &Output, spec: &crate::spec::Spec) -> String {
+    let p = &spec.headpose;
+    let mut md = String::from("# Head pose control (paper 3.1, 5.3)\n\n");
+    md.push_str(&format!(
+        "Static targets: every combination of pitch {{-{0}, 0, {0}}}, yaw {{-{1}, 0, {1}}}, roll \
+         {{-{2}, 0, {2}}} degrees, each simulated {3} s from the upright rest posture at 4 kHz with \
+         the voluntary controller at 25 Hz and the reflex at every step. Final error: mean angle \
+         between achieved and target skull orientation over the last 0.25 s. Settling time: when the \
+         error last entered the {4}-degree band.\n\n",
+        p.range_degrees[0], p.range_degrees[1], p.range_degrees[2], p.duration, p.settle_degrees
+    ));
+    let mut t = Table::labelled(&[
+        "controller",
+        "targets",
+        "within band at the end",
+        "mean final error (deg)",
+        "max final error (deg)",
+        "mean settling time (s)",
+        "max settling time (s)",
+    ]);
+    for c in ["teacher", "learned"] {
+        let rows: Vec<&StaticRow> = out
+            .static_rows
+            .iter()
+            .filter(|r| r.controller == c)
+            .collect();
+        let n = rows.len().max(1) as f64;
+        let within = rows
+            .iter()
+            .filter(|r| r.late_max_error < p.settle_degrees)
+            .count();
+        let settled: Vec<f64> = rows.iter().filter_map(|r| r.settling_time).collect();
+        let all_settled = settled.len() == rows.len();
+        t.push(TableRow::new(vec![
+            c.to_string(),
+            rows.len().to_string(),
+            within.to_string(),
+            format!("{:.2}", rows.iter().map(|r| r.final_error).sum::<f64>() / n),
+            format!(
+                "{:.2}",
+                rows.iter().map(|r| r.final_error).fold(0.0, f64::max)
+            ),
+            format!("{:.2}", crate::stats::mean_or_zero(&settled)),
+            if all_settled {
+                format!("{:.2}", settled.iter().copied().fold(0.0, f64::max))
+            } else {
+                "never (some)".into()
+            },
+        ]));
+    }
+    md.push_str(&t.markdown());
+    md.push_str("\nPer target (learned controller):\n\n");
+    let mut t = Table::labelled(&[
+        "pitch",
+        "yaw",
+        "roll",
+        "final error (deg)",
+        "settling time (s)",
+    ]);
+    for r in out.static_rows.iter().filter(|r| r.controller == "learned") {
+        let d = r.target.degrees();
+        t.push(TableRow::new(vec![
+            format!("{:.0}", d[0]),
+            format!("{:.0}", d[1]),
+            format!("{:.0}", d[2]),
+            format!("{:.2}", r.final_error),
+            opt(r.settling_time),
+        ]));
+    }
+    md.push_str(&t.markdown());
+    md.push_str(
+        "\nPose sequences (30 fps targets, learned controller; errors after the first 0.5 s):\n\n",
+    );
+    let mut t = Table::labelled(&["sequence", "RMS error (deg)", "max error (deg)"]);
+    for r in &out.sequence_rows {
+        t.push(TableRow::new(vec![
+            r.name.clone(),
+            format!("{:.2}", r.rms_error),
+            format!("{:.2}", r.max_error),
+        ]));
+    }
+    md.push_str(&t.markdown());
+    let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
+    md.push_str(&format!(
+        "\nVoluntary network: {} inputs (pose, angular velocity, target) -> {} x {} ReLU -> {} \
+         outputs (72 activations, 72 strains x {}, 72 strain rates), Adam lr {}, {} epochs; \
+         {} training and {} test pairs from {} equilibrium fits ({} missed by more than 0.5 deg); \
+         final train MSE {:.2e}, test MSE {:.2e}.\n",
+        INPUTS,
+        p.model.layers,
+        p.model.width,
+        OUTPUTS,
+        STRAIN_SCALE,
+        p.train.learning_rate,
+        p.train.epochs,
+        out.pairs.0,
+        out.pairs.1,
+        p.fit_targets,
+        out.missed_fits,
+        last(&out.curves.train),
+        last(&out.curves.test),
+    ));
+    md.push_str(&format!(
+        "\nSeeds: headpose.seed = {}. Reproduce: `cargo run --release -- run experiments/headpose.toml`.\n",
+        p.seed
+    ));
+    md
 }

@@ -28,8 +28,10 @@ use rayon::prelude::*;
 
 use crate::cache::Entry;
 use crate::cohort::{CohortKind, CohortParams, Subject};
+use crate::experiments::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::experiments::table2::{predict_activations, range_map, training_range, RefFrame};
+use crate::experiments::table2_stage::{cohort_unit, Table2Result};
 use crate::invert::{accelerated, au_fit, Bound, BoxQp, InversionParams, Solution};
 use crate::learn::{Mlp, Normalization};
 use crate::observe::au::AU_MAX;
@@ -513,11 +515,75 @@ impl Artifact for Output {
     }
 }
 
-// 3: the expressive face (see BASIS_VERSION in run.rs). 4: one noisy detection for every
+// 3: the expressive face (see BASIS_VERSION in cell/mod.rs). 4: one noisy detection for every
 // method, scored against the clean face; Choe's linear penalty solved to convergence.
 // 5: the caption's ordinal ("every 3rd video frame"; the markdown is cached with the stage).
 // 6: the times per frame leave the table for the run's `timings/`.
 const INVERSION_VERSION: u32 = 6;
+
+/// The inversion table in the registry: on Table 2's cohorts (the spec must list "table2",
+/// which runs first), with the first seed's unified network.
+pub(crate) struct Inversion;
+
+impl Experiment for Inversion {
+    fn name(&self) -> &'static str {
+        "inversion"
+    }
+
+    fn plan(&self, plan: &mut Plan) -> Result<()> {
+        let (spec, a) = (plan.spec, plan.assets);
+        let cohort = cohort_unit(spec, &a.face, &a.data(spec)?);
+        let k = plan.keys();
+        let Some((_, train_key)) = k.unified().first().copied() else {
+            return Ok(());
+        };
+        let mut inputs = vec![cohort.key.as_str(), train_key, k.dataset.as_str()];
+        inputs.extend(k.basis.as_deref());
+        let u = unit(spec, &inputs);
+        plan.add("inversion", u);
+        Ok(())
+    }
+
+    fn run(&self, cx: &mut CellRun) -> Result<()> {
+        let spec = cx.spec;
+        let t2 = cx
+            .products
+            .get::<Table2Result>()
+            .context("the inversion table runs on Table 2's cohorts: list \"table2\" first")?;
+        let (n, k, model, basis) = (cx.networks()?, cx.keys()?, cx.model()?, cx.basis()?);
+        let basis = basis
+            .as_ref()
+            .as_ref()
+            .context("inversion always has a basis key")?;
+        let calibration = spec_calibration(spec)?;
+        let inverter = Inverter::new(&model, basis, &calibration)?;
+        let (seed, train_key, mlp) = n.unified(&k).into_iter().next().context("no seed")?;
+        let mut keys = vec![
+            t2.cohort_key.as_str(),
+            train_key.as_str(),
+            k.dataset.as_str(),
+        ];
+        keys.extend(k.basis.as_deref());
+        let source = crate::experiments::face::FaceSource::of_spec(spec);
+        let out = stage(
+            spec,
+            &source,
+            &mut cx.stages(),
+            &keys,
+            &inverter,
+            &calibration,
+            &t2.reference,
+            mlp,
+            &n.training_aus(),
+        )
+        .with_context(|| format!("the inversion table (network of seed {seed})"))?;
+        cx.output("inversion.csv", out.csv)?;
+        // Timings are measurements, not results: outside the compared outputs.
+        cx.measurement("inversion.csv", &out.timing)?;
+        cx.measurement("inversion.md", &out.timing_markdown)?;
+        cx.table("methods.md", &out.markdown)
+    }
+}
 
 /// The inversion's unit: `inversion.*` and its inputs' keys (the cohort, the first seed's
 /// unified network, the dataset and the basis).

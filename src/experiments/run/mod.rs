@@ -1,14 +1,10 @@
 //! `facelab run | status | verify`: a spec's stages, cached by content (DESIGN 2.5).
 //!
-//! Stages and what their keys hash (besides the stage name and version):
-//! - `basis` (only with `dataset.start = "predicted"`): the face assets, `dataset.subdivisions`,
-//!   `dataset.tolerance`, `dataset.shear_modulus_fraction`;
-//! - `dataset`: the basis key, the face, expression and calibration files, `dataset.*`
-//!   except `dataset.test_fraction` (the split happens at training),
-//!   `observer.*`;
-//! - `train` (per seed and network): the dataset key, `model.*`, `train.*`,
-//!   `dataset.test_fraction`, the FACS maps, the seed and the network;
-//! - evaluation and reports are cheap and always run.
+//! A run resolves the spec into cells and runs, in each cell, every registered experiment
+//! (`experiments::EXPERIMENTS`) the cell's spec asks for, through the cell's context
+//! (`experiments::cell`); then a sweep's summary. The networks' stages and what their keys
+//! hash are in `cell::keys`; each experiment's in its own file. Evaluation and reports are
+//! cheap and always run.
 //!
 //! Each run writes `results/<experiment>/run-NNNN/` (one subfolder per sweep cell) with the
 //! resolved `spec.toml`, `manifest.json` and CSVs; `results/<experiment>/latest` points at it.
@@ -20,32 +16,15 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use crate::cache::{self, Cache};
-use crate::experiments::face::FaceSource;
-use crate::experiments::headpose;
-use crate::experiments::pose_transfer;
-use crate::experiments::realfaces;
-use crate::experiments::stage::{Stages, Unit};
-use crate::experiments::table1::Row;
-use crate::experiments::table2;
-use crate::experiments::table2_stage::{self};
+use crate::experiments::cell::{assets, CellRun, Plan, Products, Sink, Sweep};
+use crate::experiments::stage::Unit;
+use crate::experiments::{table1, EXPERIMENTS};
 use crate::io::atomic::write_atomic;
-use crate::spec::{self, Cell};
+use crate::spec;
 
-mod cell;
 mod folders;
-mod keys;
-mod table1_report;
 
-pub(crate) use cell::curves_csv;
-pub(crate) use keys::{spec_calibration, FaceSettings};
-use {cell::*, folders::*, keys::*, table1_report::*};
-
-/// Code versions: bump when a stage's output for the same inputs changes.
-// 2: the expressive face (human range of motion, eyes opened to an adult aperture, lip
-// contact) read by its recalibrated observer.
-const BASIS_VERSION: u32 = 2;
-const DATASET_VERSION: u32 = 2;
-const TRAIN_VERSION: u32 = 1;
+use folders::*;
 
 #[derive(Clone, Debug)]
 pub struct RunOptions {
@@ -60,7 +39,6 @@ pub struct RunOptions {
 }
 
 pub use super::stage::StageRecord;
-pub(crate) use cell::Trained;
 
 #[derive(Clone, Debug)]
 pub struct RunSummary {
@@ -70,51 +48,32 @@ pub struct RunSummary {
     pub outputs: BTreeMap<String, String>,
 }
 
-/// The head-neck experiment of one cell: CSVs into the run folder (through `write`), the
-/// paper table and figures when the spec is a single cell.
-fn headpose_outputs(
-    cell: &Cell,
-    prefix: &str,
-    single: bool,
-    out: &Publish,
-    cache: &Cache,
-    records: &mut Vec<StageRecord>,
-    write: &mut dyn FnMut(String, Vec<u8>) -> Result<()>,
-) -> Result<Vec<u8>> {
-    let spec = &cell.spec;
-    let publish = out;
-    let out = headpose::stage(spec, &mut Stages::new(cache, &cell.name, records))?;
-    write(
-        format!("{prefix}headpose_static.csv"),
-        headpose::static_csv(&out.static_rows).into_bytes(),
-    )?;
-    write(
-        format!("{prefix}headpose_sequences.csv"),
-        headpose::sequences_csv(&out.sequence_rows).into_bytes(),
-    )?;
-    write(
-        format!("{prefix}headpose_trajectories.csv"),
-        out.trajectories_csv.clone().into_bytes(),
-    )?;
-    write(
-        format!("{prefix}headpose_curves.csv"),
-        curves_csv(&out.curves).into_bytes(),
-    )?;
-    write(
-        format!("{prefix}voluntary.safetensors"),
-        out.weights.clone(),
-    )?;
-    if single {
-        let report = &spec.report_prefix;
-        publish.table(
-            &format!("{report}headpose.md"),
-            &headpose::markdown(&out, spec),
-        )?;
-        let source = FaceSource::of_spec(spec);
-        let figures = publish.figures.join(format!("{report}headpose"));
-        headpose::figures(&figures, &out, spec, &source.model()?)?;
+/// A run's folder and its tables and figures, as the experiments write into them.
+struct RunSink<'a> {
+    dir: &'a Path,
+    publish: &'a Publish,
+    /// Output file (relative to the run folder) -> SHA-256.
+    outputs: BTreeMap<String, String>,
+}
+
+impl Sink for RunSink<'_> {
+    fn output(&mut self, rel: &str, bytes: Vec<u8>) -> Result<()> {
+        write_atomic(&self.dir.join(rel), &bytes)?;
+        self.outputs.insert(rel.to_string(), cache::sha256(&bytes));
+        Ok(())
     }
-    Ok(out.weights)
+
+    fn measurement(&mut self, rel: &str, bytes: &[u8]) -> Result<()> {
+        Ok(write_atomic(&self.dir.join(rel), bytes)?)
+    }
+
+    fn table(&self, name: &str, text: &str) -> Result<()> {
+        self.publish.table(name, text)
+    }
+
+    fn figures(&self) -> &Path {
+        &self.publish.figures
+    }
 }
 
 /// Runs every cell of a spec file.
@@ -171,199 +130,48 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         }
     };
     let mut records = Vec::new();
-    let mut outputs: BTreeMap<String, String> = BTreeMap::new();
-    let write =
-        |rel: String, bytes: Vec<u8>, outputs: &mut BTreeMap<String, String>| -> Result<()> {
-            let path = run_dir.join(&rel);
-            write_atomic(&path, &bytes)?;
-            outputs.insert(rel, cache::sha256(&bytes));
-            Ok(())
-        };
-    let mut sweep_rows: Vec<(String, Vec<Row>)> = Vec::new();
-    let mut sweep_table2: Vec<(String, Vec<table2::Row>)> = Vec::new();
-    let mut sweep_realfaces: Vec<(String, Vec<realfaces::FileRow>)> = Vec::new();
-    for cell in &cells {
-        let prefix = if cells.len() > 1 {
-            format!("{}/", sanitize(&cell.name))
-        } else {
+    let mut sink = RunSink {
+        dir: &run_dir,
+        publish: &publish,
+        outputs: BTreeMap::new(),
+    };
+    let single = cells.len() == 1;
+    let mut products: Vec<(String, Products)> = Vec::new();
+    for c in &cells {
+        let prefix = if single {
             String::new()
+        } else {
+            format!("{}/", sanitize(&c.name))
         };
-        write(
-            format!("{prefix}spec.toml"),
-            cell.spec.to_toml().into_bytes(),
-            &mut outputs,
-        )?;
-        let mut voluntary = None;
-        if cell.spec.tables.iter().any(|t| t == "headpose") {
-            voluntary = Some(headpose_outputs(
-                cell,
-                &prefix,
-                cells.len() == 1,
-                &publish,
-                &cache,
-                &mut records,
-                &mut |rel, bytes| write(rel, bytes, &mut outputs),
-            )?);
+        sink.output(&format!("{prefix}spec.toml"), c.spec.to_toml().into_bytes())?;
+        let mut cx = CellRun::new(
+            &c.spec,
+            &c.name,
+            prefix,
+            single,
+            &a,
+            &cache,
+            &mut records,
+            &mut sink,
+        );
+        for e in EXPERIMENTS.iter().filter(|e| e.wanted(&c.spec)) {
+            e.run(&mut cx)?;
         }
-        if cell.spec.tables.iter().all(|t| t == "headpose") {
-            continue;
+        // Every cell that trained records its networks, whatever its tables.
+        if let Some(n) = cx.trained() {
+            table1::record(&mut cx, &n)?;
         }
-        let result = run_cell(cell, &a, &cache, &mut records)?;
-        write(
-            format!("{prefix}table1.csv"),
-            table1_csv(&result.rows).into_bytes(),
-            &mut outputs,
-        )?;
-        write(
-            format!("{prefix}curves.csv"),
-            all_curves_csv(&result.curves).into_bytes(),
-            &mut outputs,
-        )?;
-        if cells.len() == 1 {
-            // A spec that trains only for its own table (e.g. the real-data table) keeps its
-            // Table 1 in the run folder.
-            if cell.spec.tables.iter().any(|t| t == "table1") {
-                let report = &cell.spec.report_prefix;
-                let md = table1_markdown(&result.rows, &cell.spec, result.samples);
-                publish.table(&format!("{report}table1.md"), &md)?;
-                publish.table(&format!("{report}table1.tex"), &table1_tex(&result.rows))?;
-                let figures = publish.figures.join(format!("{report}table1"));
-                table1_figures(&figures, &result)?;
-            }
-            write(
-                "unified.safetensors".into(),
-                result.unified.clone(),
-                &mut outputs,
-            )?;
-            write(
-                "training_aus.csv".into(),
-                result.training_aus.clone().into_bytes(),
-                &mut outputs,
-            )?;
-        }
-        if let Some(iv) = &result.inversion {
-            write(
-                format!("{prefix}inversion.csv"),
-                iv.csv.clone().into_bytes(),
-                &mut outputs,
-            )?;
-            // Timings are measurements, not results: outside the compared outputs.
-            for (name, text) in [
-                ("inversion.csv", &iv.timing),
-                ("inversion.md", &iv.timing_markdown),
-            ] {
-                let path = run_dir.join(&prefix).join("timings").join(name);
-                write_atomic(&path, text.as_bytes())?;
-            }
-            if cells.len() == 1 {
-                publish.table(
-                    &format!("{}methods.md", cell.spec.report_prefix),
-                    &iv.markdown,
-                )?;
-            }
-        }
-        if let Some(t2) = &result.table2 {
-            write(
-                format!("{prefix}table2.csv"),
-                table2_stage::csv(&t2.rows).into_bytes(),
-                &mut outputs,
-            )?;
-            write(
-                format!("{prefix}reference.csv"),
-                table2::reference_csv(&t2.reference).into_bytes(),
-                &mut outputs,
-            )?;
-            write(
-                format!("{prefix}table2_frames.csv"),
-                table2_stage::frames_csv(&t2.reference, &t2.first).into_bytes(),
-                &mut outputs,
-            )?;
-            let real = result.table2_real.as_deref().unwrap_or(&[]);
-            if let Some(rows) = &result.table2_real {
-                write(
-                    format!("{prefix}table2_real.csv"),
-                    realfaces::csv(rows).into_bytes(),
-                    &mut outputs,
-                )?;
-            }
-            if cells.len() == 1 {
-                let report = &cell.spec.report_prefix;
-                publish.table(
-                    &format!("{report}table2.md"),
-                    &table2_stage::markdown(&t2.rows, &cell.spec, &t2.reference, real),
-                )?;
-                publish.table(
-                    &format!("{report}table2.tex"),
-                    &table2_stage::tex(&t2.rows, real, cell.spec.seeds.len()),
-                )?;
-                let figures = publish.figures.join(format!("{report}table2"));
-                for (name, bytes) in &t2.renders {
-                    write_atomic(&figures.join(name), bytes)?;
-                }
-                table2_stage::bars(&figures.join("au_mse_bars.png"), &t2.rows)?;
-            }
-            // Head pose from the cohorts, where the spec has the head-neck controller.
-            if let Some(weights) = &voluntary {
-                let rows = pose_transfer::stage(
-                    &cell.spec,
-                    &mut Stages::new(&cache, &cell.name, &mut records),
-                    &t2.cohort_key,
-                    weights,
-                    &t2.reference,
-                )?;
-                write(
-                    format!("{prefix}table2_pose.csv"),
-                    pose_transfer::csv(&rows).into_bytes(),
-                    &mut outputs,
-                )?;
-                if cells.len() == 1 {
-                    let md = pose_transfer::markdown(&rows);
-                    publish.table(&format!("{}table2_pose.md", cell.spec.report_prefix), &md)?;
-                }
-            }
-        }
-        if let Some(rf) = &result.realfaces {
-            write(
-                format!("{prefix}realfaces.csv"),
-                realfaces::csv(rf).into_bytes(),
-                &mut outputs,
-            )?;
-            if cells.len() == 1 {
-                publish.table(
-                    &format!("{}realfaces.md", cell.spec.report_prefix),
-                    &realfaces::markdown(rf, &cell.spec),
-                )?;
-            }
-        }
-        if let Some(rf) = result.realfaces {
-            sweep_realfaces.push((cell.name.clone(), rf));
-        }
-        if let Some(t2) = result.table2 {
-            sweep_table2.push((cell.name.clone(), t2.rows));
-        }
-        sweep_rows.push((cell.name.clone(), result.rows));
+        products.push((c.name.clone(), cx.products));
     }
-    if cells.len() > 1 {
-        let mut md = sweep_markdown(&experiment, &sweep_rows);
-        if !sweep_table2.is_empty() {
-            md.push_str(&table2_stage::sweep_markdown(&sweep_table2));
+    if !single {
+        let mut sweep = Sweep::new(&experiment, &products, &mut sink);
+        table1::sweep_record(&mut sweep)?;
+        for e in EXPERIMENTS {
+            e.sweep(&mut sweep)?;
         }
-        if !sweep_realfaces.is_empty() {
-            md.push_str(&realfaces::sweep_markdown(&sweep_realfaces));
-        }
-        write(
-            format!("{experiment}.csv"),
-            sweep_csv(&sweep_rows).into_bytes(),
-            &mut outputs,
-        )?;
-        publish.table(&format!("{experiment}.md"), &md)?;
-        let dir = publish.figures.join(&experiment);
-        sweep_figure(&dir, &sweep_rows)?;
-        if !sweep_table2.is_empty() {
-            let names: Vec<&str> = sweep_table2.iter().map(|(n, _)| n.as_str()).collect();
-            table2_stage::sweep_figure(&dir, &sweep_table2, &sweep_labels(&names).1)?;
-        }
+        sweep.finish()?;
     }
+    let outputs = sink.outputs;
     let manifest = serde_json::json!({
         "facelab_version": env!("CARGO_PKG_VERSION"),
         // The code: the commit the binary was built from (`build.rs`), wherever it runs.
@@ -444,7 +252,8 @@ pub fn status(spec_path: &Path, sets: &[String], results: &Path) -> Result<Vec<S
     let cache = Cache::new(&results.join(".cache"));
     let mut out = Vec::new();
     for cell in &cells {
-        for p in plan(cell, &a, &cache)? {
+        let plan = Plan::of(&cell.spec, &cell.name, &a, &cache, EXPERIMENTS)?;
+        for p in plan {
             let state = match &p.unit {
                 Ok(u) => match cache.inspect(u.stage, &u.key) {
                     crate::cache::Lookup::Hit(_) => UnitState::Cached,

@@ -13,8 +13,9 @@ use crate::cache::Entry;
 use crate::cohort::CohortKind;
 use crate::dataset::reader::FaceReader;
 use crate::dataset::Sample;
+use crate::experiments::cell::{self, spec_calibration, CellRun, Experiment, Plan, Sweep};
 use crate::experiments::face::FaceSource;
-use crate::experiments::run;
+use crate::experiments::realfaces;
 use crate::experiments::stage::{text, Artifact, Files, Stages, Unit};
 use crate::experiments::table2::{
     self, clip_count, clip_ranges, range_map, reference, reference_csv, reference_from_csv,
@@ -33,7 +34,7 @@ mod report;
 use renders::*;
 pub use report::{bars, csv, frames_csv, markdown, sweep_figure, sweep_markdown, tex};
 
-// 2: the expressive face and its recalibrated observer (see BASIS_VERSION in run/mod.rs).
+// 2: the expressive face and its recalibrated observer (see BASIS_VERSION in cell/mod.rs).
 // 3: video heads sway about their mean pose (cohort.*.head_motion_deg, head_motion_hz).
 const COHORT_VERSION: u32 = 3;
 const TRANSFER_VERSION: u32 = 2;
@@ -66,6 +67,103 @@ pub struct Table2Result {
     pub first: Vec<(Setting, Vec<Transferred>)>,
     /// Renders: (file name, bytes).
     pub renders: Vec<(String, Vec<u8>)>,
+}
+
+/// Table 2 in the registry: the cohorts, each seed's transfer, the renders, and the committed
+/// real file (`table2.openface`) beside the cohorts.
+pub(crate) struct Table2;
+
+impl Experiment for Table2 {
+    fn name(&self) -> &'static str {
+        "table2"
+    }
+
+    fn plan(&self, plan: &mut Plan) -> Result<()> {
+        let (spec, a) = (plan.spec, plan.assets);
+        let cohort = cohort_unit(spec, &a.face, &a.data(spec)?);
+        let k = plan.keys();
+        let transfers: Vec<(u64, Unit)> = k
+            .unified()
+            .into_iter()
+            .map(|(seed, train_key)| {
+                let t = transfer_unit(spec, &cohort.key, train_key, &k.dataset, k.basis.as_deref());
+                (seed, t)
+            })
+            .collect();
+        let first = transfers.first().map(|(_, t)| t.key.clone());
+        plan.add("cohort", cohort);
+        for (seed, t) in transfers {
+            plan.add(format!("transfer seed {seed}"), t);
+        }
+        if let Some(first) = first {
+            plan.add("renders", renders_unit(&first));
+        }
+        if let Some(file) = &spec.table2_openface {
+            let committed = [crate::io::realdata::committed_input(file)];
+            realfaces::plan_files(plan, &format!("realfaces {file}"), &committed)?;
+        }
+        Ok(())
+    }
+
+    fn run(&self, cx: &mut CellRun) -> Result<()> {
+        let spec = cx.spec;
+        let (n, k, model, basis) = (cx.networks()?, cx.keys()?, cx.model()?, cx.basis()?);
+        let calibration = spec_calibration(spec)?;
+        let inputs = Inputs {
+            spec,
+            source: &FaceSource::of_spec(spec),
+            face: cx.assets.face.clone(),
+            data: cx.assets.data(spec)?,
+            dataset_key: &k.dataset,
+            basis_key: k.basis.as_deref(),
+            unified: n.unified(&k),
+            samples: &n.samples,
+            model: &model,
+            basis: basis.as_ref().as_ref(),
+            calibration: &calibration,
+        };
+        let t2 = run(&inputs, &mut cx.stages())?;
+        // The committed real file through every seed's network, reported beside the cohorts.
+        let real = match &spec.table2_openface {
+            Some(file) => Some(
+                realfaces::through_networks(cx, &[crate::io::realdata::committed_input(file)])
+                    .with_context(|| format!("Table 2's real file {file}"))?,
+            ),
+            None => None,
+        };
+        cx.output("table2.csv", csv(&t2.rows))?;
+        cx.output("reference.csv", reference_csv(&t2.reference))?;
+        cx.output("table2_frames.csv", frames_csv(&t2.reference, &t2.first))?;
+        if let Some(rows) = &real {
+            cx.output("table2_real.csv", realfaces::csv(rows))?;
+        }
+        let real = real.as_deref().unwrap_or(&[]);
+        cx.table("table2.md", &markdown(&t2.rows, spec, &t2.reference, real))?;
+        cx.table("table2.tex", &tex(&t2.rows, real, spec.seeds.len()))?;
+        if let Some(figures) = cx.figures("table2") {
+            for (name, bytes) in &t2.renders {
+                crate::io::atomic::write_atomic(&figures.join(name), bytes)?;
+            }
+            bars(&figures.join("au_mse_bars.png"), &t2.rows)?;
+        }
+        cx.products.put(t2);
+        Ok(())
+    }
+
+    fn sweep(&self, sweep: &mut Sweep) -> Result<()> {
+        let cells: Vec<(String, Vec<Row>)> = sweep
+            .each::<Table2Result>()
+            .into_iter()
+            .map(|(name, t2)| (name, t2.rows.clone()))
+            .collect();
+        if cells.is_empty() {
+            return Ok(());
+        }
+        sweep.markdown.push_str(&sweep_markdown(&cells));
+        let names: Vec<&str> = cells.iter().map(|(n, _)| n.as_str()).collect();
+        let labels = crate::experiments::table1::sweep_labels(&names).1;
+        sweep_figure(&sweep.figures(), &cells, &labels)
+    }
 }
 
 /// The reference frames of the cohorts, as `reference.csv`.
@@ -113,7 +211,7 @@ struct CohortInputs<'a> {
     data: &'a str,
     cohort: &'a crate::cohort::CohortParams,
     source: crate::dataset::reader::Source,
-    settings: run::FaceSettings,
+    settings: cell::FaceSettings,
 }
 
 /// The cohorts' unit: the face mesh's and the data files' hashes, `cohort.*`,
@@ -124,7 +222,7 @@ pub fn cohort_unit(spec: &Spec, face: &str, data: &str) -> Unit {
         data,
         cohort: &spec.cohort,
         source: spec.observer_source,
-        settings: run::FaceSettings::of(&spec.dataset),
+        settings: cell::FaceSettings::of(&spec.dataset),
     };
     Unit::new("cohort", COHORT_VERSION, &inputs, &[])
 }

@@ -372,28 +372,25 @@ pub fn sweep_figure(
 /// Table 2 over a sweep: per cell, each cohort's mean AU MSE (over 17 AUs, mean over seeds)
 /// unnormalized and normalized.
 pub fn sweep_markdown(cells: &[(String, Vec<Row>)]) -> String {
-    let mut out = String::from(
-        "\n## Table 2: mean AU MSE over 17 AUs (unnormalized / normalized)\n\n| cell |",
-    );
-    for k in CohortKind::ALL {
-        out.push_str(&format!(" {} |", k.name().replace('_', " ")));
-    }
-    out.push_str(&format!(
-        "\n|---|{}\n",
-        "---|".repeat(CohortKind::ALL.len())
-    ));
+    let out = "\n## Table 2: mean AU MSE over 17 AUs (unnormalized / normalized)\n\n";
+    let kinds = CohortKind::ALL.map(|k| k.name().replace('_', " "));
+    let header: Vec<&str> = std::iter::once("cell")
+        .chain(kinds.iter().map(String::as_str))
+        .collect();
+    let mut t = Table::labelled(&header);
     for (name, rows) in cells {
         let s = summary(rows);
         let mean = |k, setting| mean_over_aus(&s, k, setting);
-        out.push_str(&format!("| {name} |"));
-        for k in CohortKind::ALL {
-            out.push_str(&format!(
-                " {:.4} / {:.4} |",
+        let means = CohortKind::ALL.map(|k| {
+            format!(
+                "{:.4} / {:.4}",
                 mean(k, Setting::Unnormalized),
                 mean(k, Setting::Normalized)
-            ));
-        }
-        out.push('\n');
+            )
+        });
+        t.push(TableRow::new(
+            std::iter::once(name.clone()).chain(means).collect(),
+        ));
     }
-    out
+    out.to_string() + &t.markdown()
 }

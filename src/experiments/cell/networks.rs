@@ -1,29 +1,27 @@
-//! One sweep cell of a run: the basis, dataset and training stages through the cache, and
-//! the evaluation of Table 1 and Table 2 on what they made.
+//! The networks of a cell, which every table but the head-neck experiment reads: the basis,
+//! the dataset and the training stages through the cache, and each seed's held-out test
+//! (Table 1's rows, the record every training run writes).
 
-use crate::cache::{Cache, Entry};
+use crate::cache::Entry;
 use crate::dataset::reader::FaceReader;
 use crate::dataset::{self, Sample};
 use crate::experiments::face::FaceSource;
-use crate::experiments::inversion;
-use crate::experiments::realfaces;
-use crate::experiments::stage::{text, Artifact, StageRecord, Stages, Unit};
+use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::experiments::table1::{self, Network, Row};
-use crate::experiments::table2_stage::{self, Table2Result};
+use crate::io::rows::{self, num, CsvRow};
 use crate::learn::{self, Curves, Mlp};
-use crate::observe::AU_NAMES;
 use crate::rng::stream;
 use crate::sim::basis::LinearBasis;
 use crate::sim::geom::V3;
 use crate::sim::{FaceModel, SolveParams};
-use crate::spec::{Cell, Spec};
+use crate::spec::Spec;
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 
-use super::*;
-use crate::io::rows::{self, num, CsvRow};
+use super::keys::{spec_calibration, Assets, Keys};
+use super::DATASET_VERSION;
 
-pub(super) fn basis_bytes(b: &LinearBasis) -> Vec<u8> {
+pub(crate) fn basis_bytes(b: &LinearBasis) -> Vec<u8> {
     let mut out = Vec::new();
     out.extend((b.vertex_count as u64).to_le_bytes());
     out.extend((b.rest.len() as u64).to_le_bytes());
@@ -41,7 +39,7 @@ pub(super) fn basis_bytes(b: &LinearBasis) -> Vec<u8> {
     out
 }
 
-pub(super) fn basis_from(bytes: &[u8]) -> Result<LinearBasis> {
+pub(crate) fn basis_from(bytes: &[u8]) -> Result<LinearBasis> {
     let mut words = bytes
         .chunks_exact(8)
         .map(|c| <[u8; 8]>::try_from(c).expect("8 bytes"));
@@ -102,37 +100,6 @@ pub(crate) fn curves_csv(curves: &Curves) -> String {
     rows::to_csv(&lines)
 }
 
-/// A line of a run's `curves.csv`: a network of a seed at one epoch.
-#[derive(serde::Serialize, serde::Deserialize)]
-struct NetworkCurveLine {
-    seed: u64,
-    network: String,
-    epoch: usize,
-    #[serde(serialize_with = "num::shortest")]
-    train_mse: f64,
-    #[serde(serialize_with = "num::shortest")]
-    test_mse: f64,
-}
-
-impl CsvRow for NetworkCurveLine {}
-
-/// Every network's curves: `seed,network,epoch,train_mse,test_mse`.
-pub(super) fn all_curves_csv(curves: &[((u64, Network), Curves)]) -> String {
-    let mut lines = Vec::new();
-    for ((seed, network), c) in curves {
-        for (i, (&train_mse, &test_mse)) in c.train.iter().zip(&c.test).enumerate() {
-            lines.push(NetworkCurveLine {
-                seed: *seed,
-                network: network.name(),
-                epoch: i + 1,
-                train_mse,
-                test_mse,
-            });
-        }
-    }
-    rows::to_csv(&lines)
-}
-
 pub(crate) fn curves_from(text: &str, name: &str) -> Result<Curves> {
     let mut c = Curves::default();
     for l in rows::from_csv::<CurveLine>(text, name)? {
@@ -140,23 +107,6 @@ pub(crate) fn curves_from(text: &str, name: &str) -> Result<Curves> {
         c.test.push(l.test_mse);
     }
     Ok(c)
-}
-
-/// Everything one cell produced.
-pub(super) struct CellResult {
-    pub(super) rows: Vec<Row>,
-    pub(super) table2: Option<Table2Result>,
-    pub(super) inversion: Option<inversion::Output>,
-    pub(super) realfaces: Option<Vec<realfaces::FileRow>>,
-    /// Table 2's committed real file (`table2.openface`) through each seed's network.
-    pub(super) table2_real: Option<Vec<realfaces::FileRow>>,
-    /// The first seed's unified network (safetensors) and the training AUs' per-AU
-    /// statistics, for `facelab transfer --model`.
-    pub(super) unified: Vec<u8>,
-    pub(super) training_aus: String,
-    /// (seed, network) -> curves.
-    pub(super) curves: Vec<((u64, Network), Curves)>,
-    pub(super) samples: usize,
 }
 
 /// The basis file: its sizes, then the rest positions and the fields (f64, little-endian).
@@ -216,7 +166,7 @@ impl Artifact for Trained {
 }
 
 /// The linear basis of the cell's face (cached), when the spec solves from predictions.
-pub(super) fn load_basis(
+pub(crate) fn load_basis(
     k: &Keys,
     stages: &mut Stages,
     model: &FaceModel,
@@ -235,17 +185,37 @@ pub(super) fn load_basis(
     Ok(Some(basis))
 }
 
-pub(super) fn run_cell(
-    cell: &Cell,
-    a: &Assets,
-    cache: &Cache,
-    records: &mut Vec<StageRecord>,
-) -> Result<CellResult> {
-    let spec = &cell.spec;
-    let k = keys(spec, a)?;
-    let mut stages = Stages::new(cache, &cell.name, records);
-    let source = FaceSource::of_spec(spec);
+/// A cell's data set and trained networks, and each seed's Table 1 row.
+pub(crate) struct Networks {
+    pub(crate) samples: Vec<Sample>,
+    /// (seed, network) -> the trained network.
+    pub(crate) nets: BTreeMap<(u64, Network), Mlp>,
+    /// (seed, network) -> curves, in seed then `Network::all()` order.
+    pub(crate) curves: Vec<((u64, Network), Curves)>,
+    /// Table 1's row of each seed: every network on its held-out test pairs.
+    pub(crate) rows: Vec<Row>,
+}
 
+impl Networks {
+    /// Every seed's unified network with its training key, in seed order.
+    pub(crate) fn unified<'a>(&'a self, k: &Keys) -> Vec<(u64, String, &'a Mlp)> {
+        k.train
+            .iter()
+            .filter(|((_, n), _)| *n == Network::Unified)
+            .map(|((seed, n), key)| (*seed, key.clone(), &self.nets[&(*seed, *n)]))
+            .collect()
+    }
+
+    /// The AUs of the training pairs (what Table 2 normalizes onto).
+    pub(crate) fn training_aus(&self) -> Vec<[f64; crate::observe::AU_COUNT]> {
+        self.samples.iter().map(|s| s.aus).collect()
+    }
+}
+
+/// The cell's dataset (its clean faces, then the detector's noise, cached apart so that a
+/// noise sweep solves the faces once) and every (seed, network) trained on it.
+pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -> Result<Networks> {
+    let source = FaceSource::of_spec(spec);
     // Dataset (and the basis it starts from): the clean faces, then the detector's noise,
     // cached apart so that a noise sweep solves the faces once.
     let clean_key = k.clean_dataset.as_ref().unwrap_or(&k.dataset);
@@ -254,7 +224,7 @@ pub(super) fn run_cell(
             let model = source.model()?;
             let reader = FaceReader::new(spec.observer_source)?;
             let observer = reader.observer(&model, spec_calibration(spec)?)?;
-            let basis = load_basis(&k, stages, &model, spec)?;
+            let basis = load_basis(k, stages, &model, spec)?;
             let jobs = dataset::jobs(&spec.dataset);
             let weights = source.weights()?;
             let progress = stages.bar(jobs.len() as u64, "dataset");
@@ -308,7 +278,7 @@ pub(super) fn run_cell(
             )))
         })?
     } else {
-        clean(&mut stages)?
+        clean(stages)?
     };
 
     // Training: every (seed, network).
@@ -348,159 +318,18 @@ pub(super) fn run_cell(
         curves.push(((*seed, *network), t.curves));
     }
 
-    let wants_table2 = spec.tables.iter().any(|t| t == "table2");
-    let calibration = spec_calibration(spec)?;
-    let mut inversion_out = None;
-    let table2 = if wants_table2 {
-        let model = source.model()?;
-        let basis = load_basis(&k, &mut stages, &model, spec)?;
-        let unified = k
-            .train
-            .iter()
-            .filter(|((_, n), _)| *n == Network::Unified)
-            .map(|((seed, n), key)| (*seed, key.clone(), &nets[&(*seed, *n)]))
-            .collect();
-        let inputs = table2_stage::Inputs {
-            spec,
-            source: &source,
-            face: a.face.clone(),
-            data: a.data(spec)?,
-            dataset_key: &k.dataset,
-            basis_key: k.basis.as_deref(),
-            unified,
-            samples: &samples,
-            model: &model,
-            basis: basis.as_ref(),
-            calibration: &calibration,
-        };
-        let t2 = table2_stage::run(&inputs, &mut stages)?;
-        if spec.tables.iter().any(|t| t == "inversion") {
-            let basis = basis.as_ref().expect("inversion always has a basis key");
-            let inverter = inversion::Inverter::new(&model, basis, &calibration)?;
-            let (seed, train_key, mlp) = &inputs.unified[0];
-            let mut keys = vec![
-                t2.cohort_key.as_str(),
-                train_key.as_str(),
-                k.dataset.as_str(),
-            ];
-            keys.extend(k.basis.as_deref());
-            let training: Vec<_> = samples.iter().map(|s| s.aus).collect();
-            inversion_out = Some(
-                inversion::stage(
-                    spec,
-                    &source,
-                    &mut stages,
-                    &keys,
-                    &inverter,
-                    &calibration,
-                    &t2.reference,
-                    mlp,
-                    &training,
-                )
-                .with_context(|| format!("the inversion table (network of seed {seed})"))?,
-            );
-        }
-        Some(t2)
-    } else {
-        None
-    };
-    // Real OpenFace files through every seed's unified network: the real-data table's files,
-    // and the committed file Table 2 reports beside its cohorts.
-    let mut real_rows =
-        |files: &[crate::io::realdata::RealInput]| -> Result<Vec<realfaces::FileRow>> {
-            let model = source.model()?;
-            let basis = load_basis(&k, &mut stages, &model, spec)?;
-            let reader = FaceReader::new(spec.observer_source)?;
-            let observer = reader.observer(&model, calibration.clone())?;
-            let training: Vec<_> = samples.iter().map(|s| s.aus).collect();
-            let inputs = realfaces::Inputs {
-                spec,
-                files,
-                dataset_key: &k.dataset,
-                basis_key: k.basis.as_deref(),
-                unified: k
-                    .train
-                    .iter()
-                    .filter(|((_, n), _)| *n == Network::Unified)
-                    .map(|((seed, n), key)| (*seed, key.clone(), &nets[&(*seed, *n)]))
-                    .collect(),
-                training_aus: &training,
-                model: &model,
-                basis: basis.as_ref(),
-                reader: &reader,
-                observer: &observer,
-            };
-            realfaces::run(&inputs, &mut stages)
-        };
-    let table2_real = match (&table2, &spec.table2_openface) {
-        (Some(_), Some(file)) => Some(
-            real_rows(&[crate::io::realdata::committed_input(file)])
-                .with_context(|| format!("Table 2's real file {file}"))?,
-        ),
-        _ => None,
-    };
-    let realfaces_rows = if spec.tables.iter().any(|t| t == "realfaces") {
-        Some(real_rows(&crate::io::realdata::inputs(&spec.realfaces)?)?)
-    } else {
-        None
-    };
-    let unified = nets[&(spec.seeds[0], Network::Unified)].to_safetensors()?;
     let mut rows = Vec::new();
     for &seed in &spec.seeds {
         let split = table1::split(&samples, spec.dataset.test_fraction, seed);
-        let seed_nets: Vec<Mlp> = Network::all()
-            .into_iter()
-            .map(|n| nets.remove(&(seed, n)).expect("trained above"))
-            .collect();
+        let seed_nets: Vec<&Mlp> = Network::all().iter().map(|n| &nets[&(seed, *n)]).collect();
         rows.push(table1::evaluate(
             seed, &seed_nets, &samples, &split, &a.facs,
         )?);
     }
-    Ok(CellResult {
-        rows,
-        table2,
-        inversion: inversion_out,
-        realfaces: realfaces_rows,
-        table2_real,
-        unified,
-        training_aus: training_aus_csv(&samples),
+    Ok(Networks {
+        samples,
+        nets,
         curves,
-        samples: samples.len(),
+        rows,
     })
-}
-
-/// A line of `training_aus.csv`: one AU over all training pairs.
-#[derive(serde::Serialize, serde::Deserialize)]
-struct TrainingAuLine {
-    au: String,
-    #[serde(serialize_with = "num::shortest")]
-    min: f64,
-    #[serde(serialize_with = "num::shortest")]
-    max: f64,
-    #[serde(serialize_with = "num::shortest")]
-    mean: f64,
-    #[serde(serialize_with = "num::shortest")]
-    sd: f64,
-}
-
-impl CsvRow for TrainingAuLine {}
-
-/// Per AU: min, max, mean and SD over all training pairs (what Table 2 normalizes onto).
-pub(super) fn training_aus_csv(samples: &[Sample]) -> String {
-    let lines: Vec<TrainingAuLine> = AU_NAMES
-        .iter()
-        .enumerate()
-        .map(|(k, name)| {
-            let v: Vec<f64> = samples.iter().map(|s| s.aus[k]).collect();
-            let (mean, sd) = crate::stats::mean_sd(&v);
-            TrainingAuLine {
-                au: name.to_string(),
-                min: v.iter().copied().fold(f64::INFINITY, f64::min),
-                max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-                mean,
-                sd,
-            }
-        })
-        .collect();
-    rows::to_csv(&lines)
 }

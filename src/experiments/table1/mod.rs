@@ -15,6 +15,9 @@ use crate::stats;
 
 use crate::dataset::Sample;
 
+mod report;
+pub(crate) use report::{record, sweep_labels, sweep_record, Table1};
+
 /// The paper's column order.
 pub const ORDER: [Expression; 6] = [
     Expression::Joy,
@@ -157,7 +160,7 @@ pub fn paired(rows: &[Row]) -> Vec<(f64, f64, bool)> {
 /// Evaluates trained networks (`nets` in `Network::all()` order) on the test split.
 pub fn evaluate(
     seed: u64,
-    nets: &[Mlp],
+    nets: &[&Mlp],
     samples: &[Sample],
     split: &Split,
     facs: &FacsMaps,

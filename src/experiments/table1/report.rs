@@ -1,14 +1,140 @@
-//! Table 1's CSV, markdown, LaTeX and figures, and the sweep summary across cells.
+//! Table 1 in the registry (its Markdown, LaTeX and figures), and the record every training
+//! writes whatever the spec's tables: `table1.csv` and `curves.csv` in the run folder, a
+//! sweep's Table 1 summary across its cells.
 
+use crate::experiments::cell::{CellRun, Experiment, Networks, Plan, Sweep, Table1Rows};
 use crate::experiments::table1::{self, Network, Row};
 use crate::io::rows::{self, num, CsvRow};
+use crate::learn::Curves;
 use crate::report::table::{Table, TableRow};
 use crate::spec::Spec;
 use crate::stats;
 use anyhow::Result;
 use std::path::Path;
 
-use super::*;
+/// Table 1: the paper table and figures of the cell's networks (whose record every run that
+/// trains writes, `record`).
+pub(crate) struct Table1;
+
+impl Experiment for Table1 {
+    fn name(&self) -> &'static str {
+        "table1"
+    }
+
+    /// Its units are the networks', which every plan that trains lists first.
+    fn plan(&self, _plan: &mut Plan) -> Result<()> {
+        Ok(())
+    }
+
+    fn run(&self, cx: &mut CellRun) -> Result<()> {
+        let n = cx.networks()?;
+        let md = table1_markdown(&n.rows, cx.spec, n.samples.len());
+        cx.table("table1.md", &md)?;
+        cx.table("table1.tex", &table1_tex(&n.rows))?;
+        if let Some(dir) = cx.figures("table1") {
+            table1_figures(&dir, &n.curves, &n.rows)?;
+        }
+        Ok(())
+    }
+}
+
+/// What every cell that trained writes, whichever tables it has: each seed's held-out test of
+/// every network (`table1.csv`), the learning curves, and, for a single-cell spec, the first
+/// seed's unified network and the training AUs' statistics (`facelab transfer --model`).
+pub(crate) fn record(cx: &mut CellRun, n: &Networks) -> Result<()> {
+    cx.output("table1.csv", table1_csv(&n.rows))?;
+    cx.output("curves.csv", all_curves_csv(&n.curves))?;
+    if cx.publishes() {
+        let unified = &n.nets[&(cx.spec.seeds[0], Network::Unified)];
+        cx.output("unified.safetensors", unified.to_safetensors()?)?;
+        cx.output("training_aus.csv", training_aus_csv(&n.samples))?;
+    }
+    cx.products.put(Table1Rows(n.rows.clone()));
+    Ok(())
+}
+
+/// A sweep's Table 1 over its cells: `<experiment>.csv`, the summary's first part, a figure.
+pub(crate) fn sweep_record(sweep: &mut Sweep) -> Result<()> {
+    let rows: Vec<(String, Vec<Row>)> = sweep
+        .each::<Table1Rows>()
+        .into_iter()
+        .map(|(name, r)| (name, r.0.clone()))
+        .collect();
+    sweep
+        .markdown
+        .push_str(&sweep_markdown(sweep.experiment, &rows));
+    let csv = format!("{}.csv", sweep.experiment);
+    sweep.output(&csv, sweep_csv(&rows))?;
+    sweep_figure(&sweep.figures(), &rows)
+}
+
+/// A line of a run's `curves.csv`: a network of a seed at one epoch.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct NetworkCurveLine {
+    seed: u64,
+    network: String,
+    epoch: usize,
+    #[serde(serialize_with = "num::shortest")]
+    train_mse: f64,
+    #[serde(serialize_with = "num::shortest")]
+    test_mse: f64,
+}
+
+impl CsvRow for NetworkCurveLine {}
+
+/// Every network's curves: `seed,network,epoch,train_mse,test_mse`.
+fn all_curves_csv(curves: &[((u64, Network), Curves)]) -> String {
+    let mut lines = Vec::new();
+    for ((seed, network), c) in curves {
+        for (i, (&train_mse, &test_mse)) in c.train.iter().zip(&c.test).enumerate() {
+            lines.push(NetworkCurveLine {
+                seed: *seed,
+                network: network.name(),
+                epoch: i + 1,
+                train_mse,
+                test_mse,
+            });
+        }
+    }
+    rows::to_csv(&lines)
+}
+
+/// A line of `training_aus.csv`: one AU over all training pairs.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TrainingAuLine {
+    au: String,
+    #[serde(serialize_with = "num::shortest")]
+    min: f64,
+    #[serde(serialize_with = "num::shortest")]
+    max: f64,
+    #[serde(serialize_with = "num::shortest")]
+    mean: f64,
+    #[serde(serialize_with = "num::shortest")]
+    sd: f64,
+}
+
+impl CsvRow for TrainingAuLine {}
+
+/// Per AU: min, max, mean and SD over all training pairs (what Table 2 normalizes onto).
+fn training_aus_csv(samples: &[crate::dataset::Sample]) -> String {
+    let lines: Vec<TrainingAuLine> = crate::observe::AU_NAMES
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let v: Vec<f64> = samples.iter().map(|s| s.aus[k]).collect();
+            let (mean, sd) = stats::mean_sd(&v);
+            let (min, max) = stats::min_max(&v);
+            TrainingAuLine {
+                au: name.to_string(),
+                min,
+                max,
+                mean,
+                sd,
+            }
+        })
+        .collect();
+    rows::to_csv(&lines)
+}
 
 /// A line of `table1.csv`: a seed (or `mean`, `ci95`), the six per-expression networks' test
 /// MSE, `all`, and the unified network's MSE per expression.
@@ -32,7 +158,7 @@ impl CsvRow for Table1Line {
 }
 
 /// `seed,joy,...,disgust,all,unified_joy,...` rows, then `mean` and `ci95`.
-pub(super) fn table1_csv(rows: &[Row]) -> String {
+fn table1_csv(rows: &[Row]) -> String {
     let flat: Vec<[f64; 13]> = rows
         .iter()
         .map(|r| {
@@ -63,7 +189,7 @@ pub(super) fn table1_csv(rows: &[Row]) -> String {
     rows::to_csv(&lines)
 }
 
-pub(super) fn summary(rows: &[Row]) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+fn summary(rows: &[Row]) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
     let col = |f: &dyn Fn(&Row) -> f64| rows.iter().map(f).collect::<Vec<_>>();
     let mut mean = Vec::new();
     let mut ci = Vec::new();
@@ -83,14 +209,14 @@ pub(super) fn summary(rows: &[Row]) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) 
     (mean, ci, umean, uci)
 }
 
-pub(super) fn paired_cell((m, c, excludes_zero): (f64, f64, bool), dagger: &str) -> String {
+fn paired_cell((m, c, excludes_zero): (f64, f64, bool), dagger: &str) -> String {
     format!(
         "{m:+.1e} ± {c:.1e}{}",
         if excludes_zero { dagger } else { "" }
     )
 }
 
-pub(super) fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> String {
+fn table1_markdown(rows: &[Row], spec: &Spec, samples: usize) -> String {
     let mut out =
         String::from("# Table 1: per-expression networks vs one unified network (test MSE)\n\n");
     out.push_str(&format!(
@@ -159,22 +285,22 @@ fn table1_table(rows: &[Row]) -> Table {
     t
 }
 
-pub(super) fn table1_tex(rows: &[Row]) -> String {
+fn table1_tex(rows: &[Row]) -> String {
     table1_table(rows).latex()
 }
 
-pub(super) fn capitalize(s: &str) -> String {
+fn capitalize(s: &str) -> String {
     let mut c = s.chars();
     c.next()
         .map(|f| f.to_uppercase().collect::<String>() + c.as_str())
         .unwrap_or_default()
 }
 
-pub(super) fn table1_figures(dir: &Path, result: &CellResult) -> Result<()> {
+fn table1_figures(dir: &Path, curves: &[((u64, Network), Curves)], rows: &[Row]) -> Result<()> {
     use crate::report::figures::{grouped_bars, log_curves, Series, PALETTE};
-    let first_seed = result.curves.first().map(|((s, _), _)| *s).unwrap_or(1);
+    let first_seed = curves.first().map(|((s, _), _)| *s).unwrap_or(1);
     let mut series = Vec::new();
-    for (i, ((seed, network), c)) in result.curves.iter().enumerate() {
+    for (i, ((seed, network), c)) in curves.iter().enumerate() {
         if *seed != first_seed {
             continue;
         }
@@ -200,7 +326,7 @@ pub(super) fn table1_figures(dir: &Path, result: &CellResult) -> Result<()> {
         "MSE",
         &series,
     )?;
-    let (mean, _, _, _) = summary(&result.rows);
+    let (mean, _, _, _) = summary(rows);
     let cats: Vec<String> = table1::ORDER
         .iter()
         .map(|e| capitalize(e.name()))
@@ -220,7 +346,7 @@ pub(super) fn table1_figures(dir: &Path, result: &CellResult) -> Result<()> {
 
 /// Bars of MSE_All and the mean per-expression MSE for each cell, labelled by its values.
 /// A sweep's swept keys (`a / b`) and each cell's values (`1/2`), from cell names `a=1,b=2`.
-pub(super) fn sweep_labels(names: &[&str]) -> (String, Vec<String>) {
+pub(crate) fn sweep_labels(names: &[&str]) -> (String, Vec<String>) {
     let part = |name: &str, value: bool| -> String {
         name.split(',')
             .map(|kv| {
@@ -235,7 +361,7 @@ pub(super) fn sweep_labels(names: &[&str]) -> (String, Vec<String>) {
     (keys, names.iter().map(|n| part(n, true)).collect())
 }
 
-pub(super) fn sweep_figure(dir: &Path, rows: &[(String, Vec<Row>)]) -> Result<()> {
+fn sweep_figure(dir: &Path, rows: &[(String, Vec<Row>)]) -> Result<()> {
     use crate::report::figures::{grouped_bars, PALETTE};
     let names: Vec<&str> = rows.iter().map(|(n, _)| n.as_str()).collect();
     let (keys, labels) = sweep_labels(&names);
@@ -281,7 +407,7 @@ impl CsvRow for SweepLine {
     const QUOTE_TEXT: bool = true;
 }
 
-pub(super) fn sweep_csv(rows: &[(String, Vec<Row>)]) -> String {
+fn sweep_csv(rows: &[(String, Vec<Row>)]) -> String {
     let lines: Vec<SweepLine> = rows
         .iter()
         .map(|(name, r)| {
@@ -298,22 +424,19 @@ pub(super) fn sweep_csv(rows: &[(String, Vec<Row>)]) -> String {
     rows::to_csv(&lines)
 }
 
-pub(super) fn sweep_markdown(experiment: &str, rows: &[(String, Vec<Row>)]) -> String {
-    let mut out = format!(
-        "# {experiment}: Table 1 over a sweep\n\n| cell | MSE_All (unified) | mean of per-expression MSEs |\n|---|---|---|\n"
-    );
+fn sweep_markdown(experiment: &str, rows: &[(String, Vec<Row>)]) -> String {
+    let out = format!("# {experiment}: Table 1 over a sweep\n\n");
+    let mut t = Table::labelled(&["cell", "MSE_All (unified)", "mean of per-expression MSEs"]);
     for (name, r) in rows {
         let all: Vec<f64> = r.iter().map(|x| x.all).collect();
         let per: Vec<f64> = r.iter().map(|x| stats::mean(&x.per_expression)).collect();
-        out.push_str(&format!(
-            "| {name} | {:.2e} ± {:.1e} | {:.2e} ± {:.1e} |\n",
-            stats::mean(&all),
-            stats::ci95(&all),
-            stats::mean(&per),
-            stats::ci95(&per)
-        ));
+        t.push(TableRow::new(vec![
+            name.clone(),
+            format!("{:.2e} ± {:.1e}", stats::mean(&all), stats::ci95(&all)),
+            format!("{:.2e} ± {:.1e}", stats::mean(&per), stats::ci95(&per)),
+        ]));
     }
-    out
+    out + &t.markdown()
 }
 
 #[cfg(test)]

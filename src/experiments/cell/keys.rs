@@ -1,0 +1,185 @@
+//! The inputs a run's stages share (asset and data files by content) and the cache keys of
+//! a cell's basis, dataset and training stages.
+
+use crate::cache;
+use crate::dataset::reader::Source;
+use crate::dataset::{DatasetParams, Family, SolveStart};
+use crate::experiments::stage::Unit;
+use crate::experiments::table1::Network;
+use crate::io::expressions::default_expressions_path;
+use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
+use crate::io::mesh::default_mesh_path;
+use crate::io::observer_fit::read_any_calibration;
+use crate::learn::params::{ModelParams, TrainParams};
+use crate::observe::Calibration;
+use crate::observe::ObserverNoise;
+use crate::spec::Spec;
+use anyhow::{Context, Result};
+use serde::Serialize;
+use std::path::Path;
+
+use super::{BASIS_VERSION, DATASET_VERSION, TRAIN_VERSION};
+
+/// The face settings every solve reads: the basis, the dataset and the cohorts hash them.
+#[derive(Serialize)]
+pub(crate) struct FaceSettings {
+    subdivisions: u8,
+    tolerance: f64,
+    shear_modulus_fraction: f64,
+}
+
+impl FaceSettings {
+    pub(crate) fn of(d: &DatasetParams) -> FaceSettings {
+        FaceSettings {
+            subdivisions: d.subdivisions,
+            tolerance: d.tolerance,
+            shear_modulus_fraction: d.shear_modulus_fraction,
+        }
+    }
+}
+
+/// What the dataset's faces depend on. Not `dataset.test_fraction`: it splits the pairs at
+/// training (the train key has it), not the faces.
+#[derive(Serialize)]
+struct DatasetInputs<'a> {
+    face: &'a str,
+    data: &'a str,
+    settings: FaceSettings,
+    pairs_per_expression: usize,
+    start: SolveStart,
+    family: Family,
+    seed: u64,
+    observer: ObserverNoise,
+    calibration: &'a str,
+    source: Source,
+}
+
+/// What one network's training depends on (besides the dataset's key).
+#[derive(Serialize)]
+struct TrainInputs<'a> {
+    facs: &'a str,
+    seed: u64,
+    network: String,
+    model: &'a ModelParams,
+    train: &'a TrainParams,
+    test_fraction: f64,
+}
+
+pub(crate) fn file_hash(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    Ok(cache::sha256(&bytes))
+}
+
+/// The inputs every stage shares: assets and data files, by content.
+pub(crate) struct Assets {
+    pub(crate) face: String,
+    pub(crate) expressions: String,
+    pub(crate) facs: FacsMaps,
+    pub(crate) facs_hash: String,
+}
+
+impl Assets {
+    /// The expression weights' and the spec's observer calibration's hashes.
+    pub(crate) fn data(&self, spec: &Spec) -> Result<String> {
+        Ok(format!(
+            "{}{}",
+            self.expressions,
+            file_hash(&data_path(&spec.calibration))?
+        ))
+    }
+}
+
+/// The spec's observer calibration (`observer.calibration`: gains or a fitted readout).
+pub(crate) fn spec_calibration(spec: &Spec) -> Result<Calibration> {
+    read_any_calibration(&data_path(&spec.calibration))
+        .with_context(|| format!("observer.calibration = \"{}\"", spec.calibration))
+}
+
+pub(crate) fn assets() -> Result<Assets> {
+    let face = file_hash(&default_mesh_path())?;
+    let expressions = file_hash(&default_expressions_path())?;
+    let ea = data_path(DEFAULT_EXPRESSION_AUS);
+    let am = data_path(DEFAULT_AU_MUSCLES);
+    let facs = read_facs(&ea, &am)?;
+    let facs_hash = format!("{}{}", file_hash(&ea)?, file_hash(&am)?);
+    Ok(Assets {
+        face,
+        expressions,
+        facs,
+        facs_hash,
+    })
+}
+
+/// Cache keys of a cell's stages.
+pub(crate) struct Keys {
+    pub(crate) basis: Option<String>,
+    pub(crate) dataset: String,
+    /// The faces without detector noise, where the spec's observer adds noise.
+    pub(crate) clean_dataset: Option<String>,
+    /// (seed, network) -> key, in seed then `Network::all()` order.
+    pub(crate) train: Vec<((u64, Network), String)>,
+}
+
+impl Keys {
+    /// Every seed's unified network's training key, in seed order.
+    pub(crate) fn unified(&self) -> Vec<(u64, &str)> {
+        self.train
+            .iter()
+            .filter(|((_, n), _)| *n == Network::Unified)
+            .map(|((seed, _), key)| (*seed, key.as_str()))
+            .collect()
+    }
+}
+
+pub(crate) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
+    let needs_basis =
+        spec.dataset.start == SolveStart::Predicted || spec.tables.iter().any(|t| t == "inversion");
+    let basis = needs_basis.then(|| {
+        let face = (a.face.as_str(), FaceSettings::of(&spec.dataset));
+        Unit::new("basis", BASIS_VERSION, &face, &[]).key
+    });
+    // The faces are read without detector noise and cached under the key of the spec with
+    // the noise off; a noisy data set is cached under its own key, made from the clean one
+    // (`dataset::add_noise`), so a noise sweep solves the faces once.
+    let data = a.data(spec)?;
+    let dataset_key = |observer: ObserverNoise| {
+        let d = &spec.dataset;
+        let inputs = DatasetInputs {
+            face: &a.face,
+            data: &data,
+            settings: FaceSettings::of(d),
+            pairs_per_expression: d.pairs_per_expression,
+            start: d.start,
+            family: d.family,
+            seed: d.seed,
+            observer,
+            calibration: &spec.calibration,
+            source: spec.observer_source,
+        };
+        let basis: Vec<&str> = basis.iter().map(String::as_str).collect();
+        Unit::new("dataset", DATASET_VERSION, &inputs, &basis).key
+    };
+    let dataset = dataset_key(spec.observer);
+    let clean_dataset = (!spec.observer.is_off()).then(|| dataset_key(ObserverNoise::default()));
+    let mut train = Vec::new();
+    for &seed in &spec.seeds {
+        for network in Network::all() {
+            let inputs = TrainInputs {
+                facs: &a.facs_hash,
+                seed,
+                network: network.name(),
+                model: &spec.model,
+                train: &spec.train,
+                test_fraction: spec.dataset.test_fraction,
+            };
+            let unit = Unit::new("train", TRAIN_VERSION, &inputs, &[&dataset]);
+            train.push(((seed, network), unit.key));
+        }
+    }
+    Ok(Keys {
+        basis,
+        dataset,
+        clean_dataset,
+        train,
+    })
+}

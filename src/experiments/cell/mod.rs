@@ -1,0 +1,384 @@
+//! The experiment registry and the context a sweep cell runs in.
+//!
+//! Every table of a run is an [`Experiment`]: its name in a spec's `tables`, the units of work
+//! it adds to a cell's plan (what `facelab status` lists and a cluster launcher submits), how
+//! it computes on a cell through the cache and writes its outputs, and its part of a sweep's
+//! summary. [`EXPERIMENTS`](crate::experiments::EXPERIMENTS) lists them; a new experiment is a
+//! new file and one line there. Experiments meet in a cell's [`CellRun`]: the spec, the cache,
+//! the networks every table but the head-neck experiment reads (computed once, on first use),
+//! and [`Products`], where an experiment leaves what a later one reads (Table 2's cohorts for
+//! the inversion and the pose transfer, the voluntary neck network for the pose transfer).
+
+use std::any::{Any, TypeId};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+use anyhow::Result;
+
+use crate::cache::Cache;
+use crate::experiments::face::FaceSource;
+use crate::experiments::stage::{StageRecord, Stages, Unit};
+use crate::sim::basis::LinearBasis;
+use crate::sim::FaceModel;
+use crate::spec::Spec;
+
+pub(crate) mod keys;
+pub(crate) mod networks;
+
+pub(crate) use keys::{assets, keys, spec_calibration, Assets, FaceSettings, Keys};
+pub(crate) use networks::{curves_csv, Networks, Trained};
+
+/// Code versions: bump when a stage's output for the same inputs changes.
+// 2: the expressive face (human range of motion, eyes opened to an adult aperture, lip
+// contact) read by its recalibrated observer.
+pub(crate) const BASIS_VERSION: u32 = 2;
+pub(crate) const DATASET_VERSION: u32 = 2;
+pub(crate) const TRAIN_VERSION: u32 = 1;
+
+/// One table of a run.
+pub(crate) trait Experiment: Sync {
+    /// Its name in a spec's `tables`.
+    fn name(&self) -> &'static str;
+
+    /// Whether a cell of `spec` runs it: by default, when `tables` lists its name.
+    fn wanted(&self, spec: &Spec) -> bool {
+        spec.tables.iter().any(|t| t == self.name())
+    }
+
+    /// Whether it reads the cell's networks (the dataset and the training stages).
+    fn trains(&self) -> bool {
+        true
+    }
+
+    /// The units of work it adds to a cell's plan, in the order a run meets them, with keys
+    /// computed by the same functions its stages use.
+    fn plan(&self, plan: &mut Plan) -> Result<()>;
+
+    /// Computes it on a cell through the cache and writes its outputs: CSVs into the run
+    /// folder, and, for a single-cell spec, its tables and figures.
+    fn run(&self, cx: &mut CellRun) -> Result<()>;
+
+    /// Its part of a sweep's summary, from every cell's products (after all cells ran).
+    fn sweep(&self, _sweep: &mut Sweep) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Where a run writes; the run implements it over its folder and its publishing.
+pub(crate) trait Sink {
+    /// A compared output, `rel` to the run folder, hashed into the manifest.
+    fn output(&mut self, rel: &str, bytes: Vec<u8>) -> Result<()>;
+    /// A measurement of this machine (timings), `rel` to the run folder, outside the compared
+    /// outputs.
+    fn measurement(&mut self, rel: &str, bytes: &[u8]) -> Result<()>;
+    /// A paper table (Markdown or LaTeX) named `name` in the tables folder.
+    fn table(&self, name: &str, text: &str) -> Result<()>;
+    /// The figures folder.
+    fn figures(&self) -> &Path;
+}
+
+/// What an experiment leaves for later ones in the same cell (and for the sweep's summary),
+/// one value per type.
+#[derive(Default)]
+pub(crate) struct Products(HashMap<TypeId, Rc<dyn Any>>);
+
+impl Products {
+    pub(crate) fn put<T: Any>(&mut self, value: T) {
+        self.0.insert(TypeId::of::<T>(), Rc::new(value));
+    }
+
+    pub(crate) fn get<T: Any>(&self) -> Option<Rc<T>> {
+        let value = self.0.get(&TypeId::of::<T>())?.clone();
+        Some(
+            value
+                .downcast::<T>()
+                .expect("products are stored under their type"),
+        )
+    }
+}
+
+/// A cell's Table 1 rows, kept for the sweep's summary.
+pub(crate) struct Table1Rows(pub(crate) Vec<crate::experiments::table1::Row>);
+
+/// One sweep cell of a run, as its experiments see it.
+pub(crate) struct CellRun<'a> {
+    pub(crate) spec: &'a Spec,
+    pub(crate) assets: &'a Assets,
+    pub(crate) products: Products,
+    cell: &'a str,
+    /// The cell's folder in the run folder: empty for a single-cell spec, `name/` in a sweep.
+    prefix: String,
+    single: bool,
+    cache: &'a Cache,
+    records: &'a mut Vec<StageRecord>,
+    sink: &'a mut dyn Sink,
+    keys: Option<Rc<Keys>>,
+    networks: Option<Rc<Networks>>,
+    model: Option<Rc<FaceModel>>,
+    basis: Option<Rc<Option<LinearBasis>>>,
+}
+
+impl<'a> CellRun<'a> {
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        spec: &'a Spec,
+        cell: &'a str,
+        prefix: String,
+        single: bool,
+        assets: &'a Assets,
+        cache: &'a Cache,
+        records: &'a mut Vec<StageRecord>,
+        sink: &'a mut dyn Sink,
+    ) -> CellRun<'a> {
+        CellRun {
+            spec,
+            assets,
+            products: Products::default(),
+            cell,
+            prefix,
+            single,
+            cache,
+            records,
+            sink,
+            keys: None,
+            networks: None,
+            model: None,
+            basis: None,
+        }
+    }
+
+    /// The cell's stages: the cache, with every unit recorded for the manifest.
+    pub(crate) fn stages(&mut self) -> Stages<'_> {
+        Stages::new(self.cache, self.cell, self.records)
+    }
+
+    /// The keys of the cell's basis, dataset and training stages.
+    pub(crate) fn keys(&mut self) -> Result<Rc<Keys>> {
+        if self.keys.is_none() {
+            self.keys = Some(Rc::new(keys(self.spec, self.assets)?));
+        }
+        Ok(self.keys.clone().expect("set above"))
+    }
+
+    /// The cell's data set and trained networks, computed (through the cache) on first use.
+    pub(crate) fn networks(&mut self) -> Result<Rc<Networks>> {
+        if let Some(n) = &self.networks {
+            return Ok(n.clone());
+        }
+        let k = self.keys()?;
+        let (spec, assets) = (self.spec, self.assets);
+        let n = Rc::new(networks::networks(spec, assets, &k, &mut self.stages())?);
+        self.networks = Some(n.clone());
+        Ok(n)
+    }
+
+    /// The networks, if an experiment of the cell asked for them.
+    pub(crate) fn trained(&self) -> Option<Rc<Networks>> {
+        self.networks.clone()
+    }
+
+    /// The cell's face model.
+    pub(crate) fn model(&mut self) -> Result<Rc<FaceModel>> {
+        if self.model.is_none() {
+            self.model = Some(Rc::new(FaceSource::of_spec(self.spec).model()?));
+        }
+        Ok(self.model.clone().expect("set above"))
+    }
+
+    /// The linear basis of the cell's face (cached), when the spec solves from predictions
+    /// or inverts.
+    pub(crate) fn basis(&mut self) -> Result<Rc<Option<LinearBasis>>> {
+        if self.basis.is_none() {
+            let (k, model, spec) = (self.keys()?, self.model()?, self.spec);
+            let basis = networks::load_basis(&k, &mut self.stages(), &model, spec)?;
+            self.basis = Some(Rc::new(basis));
+        }
+        Ok(self.basis.clone().expect("set above"))
+    }
+
+    /// Whether the cell is the whole spec: only then does it write tables and figures (a
+    /// sweep's summary is its table).
+    pub(crate) fn publishes(&self) -> bool {
+        self.single
+    }
+
+    /// Writes `name` into the cell's folder of the run (a compared output).
+    pub(crate) fn output(&mut self, name: &str, bytes: impl Into<Vec<u8>>) -> Result<()> {
+        let rel = format!("{}{name}", self.prefix);
+        self.sink.output(&rel, bytes.into())
+    }
+
+    /// Writes a measurement `name` into the cell's `timings/` folder (not a compared output).
+    pub(crate) fn measurement(&mut self, name: &str, text: &str) -> Result<()> {
+        let rel = format!("{}timings/{name}", self.prefix);
+        self.sink.measurement(&rel, text.as_bytes())
+    }
+
+    /// Writes the paper table `name` (under the spec's report prefix) for a single-cell spec.
+    pub(crate) fn table(&self, name: &str, text: &str) -> Result<()> {
+        if !self.single {
+            return Ok(());
+        }
+        self.sink
+            .table(&format!("{}{name}", self.spec.report_prefix), text)
+    }
+
+    /// The figures folder `name` (under the spec's report prefix) for a single-cell spec.
+    pub(crate) fn figures(&self, name: &str) -> Option<PathBuf> {
+        self.single.then(|| {
+            self.sink
+                .figures()
+                .join(format!("{}{name}", self.spec.report_prefix))
+        })
+    }
+}
+
+/// A sweep's summary, written after all its cells ran.
+pub(crate) struct Sweep<'a> {
+    /// The spec's experiment name: the summary's file names.
+    pub(crate) experiment: &'a str,
+    /// Every cell's name and products, in the spec's order.
+    pub(crate) cells: &'a [(String, Products)],
+    /// The summary's Markdown, each experiment appending its part.
+    pub(crate) markdown: String,
+    sink: &'a mut dyn Sink,
+}
+
+impl<'a> Sweep<'a> {
+    pub(crate) fn new(
+        experiment: &'a str,
+        cells: &'a [(String, Products)],
+        sink: &'a mut dyn Sink,
+    ) -> Sweep<'a> {
+        Sweep {
+            experiment,
+            cells,
+            markdown: String::new(),
+            sink,
+        }
+    }
+
+    /// The cells that made a `T`, with their names.
+    pub(crate) fn each<T: Any>(&self) -> Vec<(String, Rc<T>)> {
+        self.cells
+            .iter()
+            .filter_map(|(name, p)| Some((name.clone(), p.get::<T>()?)))
+            .collect()
+    }
+
+    /// Writes `rel` into the run folder (a compared output).
+    pub(crate) fn output(&mut self, rel: &str, bytes: impl Into<Vec<u8>>) -> Result<()> {
+        self.sink.output(rel, bytes.into())
+    }
+
+    /// The summary's figures folder.
+    pub(crate) fn figures(&self) -> PathBuf {
+        self.sink.figures().join(self.experiment)
+    }
+
+    /// Writes the summary's Markdown as the table `<experiment>.md`.
+    pub(crate) fn finish(self) -> Result<()> {
+        self.sink
+            .table(&format!("{}.md", self.experiment), &self.markdown)
+    }
+}
+
+/// One unit of a cell's plan: what it is, and its unit, or why its key cannot be known
+/// without running (the pose transfer's key hashes the voluntary network, known once it is
+/// cached).
+pub struct Planned {
+    pub cell: String,
+    pub label: String,
+    pub unit: Result<Unit, String>,
+}
+
+/// A cell's plan as its experiments add to it.
+pub(crate) struct Plan<'a> {
+    pub(crate) spec: &'a Spec,
+    pub(crate) assets: &'a Assets,
+    pub(crate) cache: &'a Cache,
+    cell: &'a str,
+    keys: Option<Keys>,
+    pub(crate) units: Vec<Planned>,
+}
+
+impl<'a> Plan<'a> {
+    /// The units of every experiment `experiments` of `spec` runs, in the order a run meets
+    /// them: the networks first when any experiment reads them.
+    pub(crate) fn of(
+        spec: &'a Spec,
+        cell: &'a str,
+        assets: &'a Assets,
+        cache: &'a Cache,
+        experiments: &[&dyn Experiment],
+    ) -> Result<Vec<Planned>> {
+        let wanted: Vec<&dyn Experiment> = experiments
+            .iter()
+            .copied()
+            .filter(|e| e.wanted(spec))
+            .collect();
+        let keys = if wanted.iter().any(|e| e.trains()) {
+            Some(keys(spec, assets)?)
+        } else {
+            None
+        };
+        let mut plan = Plan {
+            spec,
+            assets,
+            cache,
+            cell,
+            keys,
+            units: Vec::new(),
+        };
+        if let Some(k) = plan.keys.take() {
+            if let Some(b) = &k.basis {
+                plan.add("basis", Unit::keyed("basis", b));
+            }
+            match &k.clean_dataset {
+                Some(clean) => {
+                    plan.add("dataset (clean)", Unit::keyed("dataset", clean));
+                    plan.add("dataset_noise", Unit::keyed("dataset_noise", &k.dataset));
+                }
+                None => plan.add("dataset", Unit::keyed("dataset", &k.dataset)),
+            }
+            for ((seed, network), key) in &k.train {
+                plan.add(
+                    format!("train {} seed {seed}", network.name()),
+                    Unit::keyed("train", key),
+                );
+            }
+            plan.keys = Some(k);
+        }
+        for e in wanted {
+            e.plan(&mut plan)?;
+        }
+        Ok(plan.units)
+    }
+
+    /// The keys of the cell's basis, dataset and training stages (the plan of an experiment
+    /// that reads the networks).
+    pub(crate) fn keys(&self) -> &Keys {
+        self.keys
+            .as_ref()
+            .expect("the plan has the networks' keys when an experiment trains")
+    }
+
+    /// Adds a unit labelled `label`.
+    pub(crate) fn add(&mut self, label: impl Into<String>, unit: Unit) {
+        self.push(label, Ok(unit));
+    }
+
+    /// Adds a unit whose key is not known yet, and why.
+    pub(crate) fn waiting(&mut self, label: impl Into<String>, why: impl Into<String>) {
+        self.push(label, Err(why.into()));
+    }
+
+    fn push(&mut self, label: impl Into<String>, unit: Result<Unit, String>) {
+        self.units.push(Planned {
+            cell: self.cell.to_string(),
+            label: label.into(),
+            unit,
+        });
+    }
+}
