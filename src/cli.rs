@@ -189,6 +189,27 @@ pub enum Command {
         /// Results folder (the cache is in <results>/.cache)
         #[arg(long, default_value = "results")]
         results: PathBuf,
+        /// Where the units of work run [default: the spec's `[launcher] kind`, else local]:
+        /// `slurm` submits them as Slurm job arrays and a final job (see the README)
+        #[arg(long, value_parser = ["local", "slurm"])]
+        launcher: Option<String>,
+        /// With --launcher slurm: wait until the jobs ended; fail naming each failed task
+        #[arg(long)]
+        wait: bool,
+        /// (The final job of a Slurm run: finish this run folder from the cache.)
+        #[arg(long, hide = true)]
+        assemble: Option<PathBuf>,
+    },
+    /// (A Slurm array task of a submitted run: its units into the cache.)
+    #[command(hide = true)]
+    Task {
+        /// The submission's logs/launch.json
+        launch: PathBuf,
+        /// The array: cells or seeds
+        array: String,
+        /// The task's index [default: $SLURM_ARRAY_TASK_ID]
+        #[arg(long)]
+        index: Option<usize>,
     },
     /// Validate a spec and print it resolved, without running anything.
     Check {

@@ -144,17 +144,41 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             threads,
             results,
             publish,
+            launcher,
+            wait,
+            assemble,
         } => {
             let threads = set_threads(threads)?;
-            let summary = run::run(
-                &spec,
-                &run::RunOptions {
-                    results: results_folder(results),
-                    sets,
-                    threads,
-                    publish,
-                },
-            )?;
+            let given = launcher
+                .as_deref()
+                .and_then(facelab::spec::LauncherKind::parse);
+            let opts = run::RunOptions {
+                results: results_folder(results),
+                sets,
+                threads,
+                publish,
+                assemble,
+            };
+            let kind = run::launcher_of(&spec, &opts.sets, given)?;
+            if kind == facelab::spec::LauncherKind::Slurm && opts.assemble.is_none() {
+                let l = run::launch(&spec, &opts, wait)?;
+                let job = |j: &Option<String>| j.clone().unwrap_or_else(|| "-".into());
+                println!(
+                    "submitted {} task(s) ({} cached, not submitted): cells array {}, seeds \
+                     array {}, final job {}; run folder {}",
+                    l.tasks,
+                    l.skipped,
+                    job(&l.cells_job),
+                    job(&l.seeds_job),
+                    l.final_job,
+                    l.run_dir.display()
+                );
+                return Ok(());
+            }
+            if wait {
+                anyhow::bail!("--wait is for --launcher slurm; a local run always waits");
+            }
+            let summary = run::run(&spec, &opts)?;
             let hits = summary.stages.iter().filter(|s| s.hit).count();
             println!(
                 "{} stages, {} cached, {} computed; wrote {}",
@@ -163,6 +187,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 summary.stages.len() - hits,
                 summary.dir.display()
             );
+        }
+        Command::Task {
+            launch,
+            array,
+            index,
+        } => {
+            set_threads(None)?;
+            run::task(&launch, &array, index)?;
         }
         Command::Check { spec, sets } => {
             let cells = facelab::spec::load(&spec, &sets)?;
@@ -187,6 +219,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     run::UnitState::Missing => ("missing", String::new()),
                     run::UnitState::Damaged(why) => ("damaged", format!(" ({why})")),
                     run::UnitState::Waiting(why) => ("waiting", format!(" ({why})")),
+                    run::UnitState::Queued(by) => ("queued", format!(" ({by})")),
+                    run::UnitState::Running(by) => ("running", format!(" ({by})")),
+                    run::UnitState::Failed(why) => ("failed", format!(" ({why})")),
                 };
                 if line.state == run::UnitState::Cached {
                     cached += 1;
@@ -451,7 +486,11 @@ fn print_landmarked(l: &facelab::experiments::photos::LandmarkOutput) {
 /// Sets the worker count for rayon and for candle (which reads `RAYON_NUM_THREADS` on every
 /// matrix product when it is unset, at a cost). Returns the count used.
 fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
-    let n = threads.unwrap_or_else(|| {
+    // Inside a Slurm allocation, "all cores" are the task's.
+    let allocated = std::env::var("SLURM_CPUS_PER_TASK")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok());
+    let n = threads.or(allocated).unwrap_or_else(|| {
         std::thread::available_parallelism()
             .map(|n| n.get())
             .unwrap_or(1)

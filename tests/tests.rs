@@ -13,6 +13,7 @@ mod reach;
 mod realfaces;
 mod robustness;
 mod sim;
+mod slurm;
 mod transfer;
 
 use std::sync::OnceLock;

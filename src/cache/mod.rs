@@ -34,6 +34,49 @@ pub fn process_ended(pid: impl std::fmt::Display) -> bool {
     proc.is_dir() && !proc.join(pid.to_string()).exists()
 }
 
+/// This machine's name (`/proc/sys/kernel/hostname`; "unknown" where there is none): with a
+/// process id it names who owns a temporary entry or a lock in a cache other machines share.
+pub fn host() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .unwrap_or_else(|_| "unknown".into())
+}
+
+/// Whether the owner `host pid` (as a lock or run folder names it) has ended: its process is
+/// not running on this machine. An owner on another machine is never judged by process.
+pub fn owner_ended(owner: &str) -> bool {
+    let mut words = owner.split_whitespace();
+    let (Some(owner_host), Some(pid)) = (words.next(), words.next()) else {
+        return false;
+    };
+    owner_host == host() && process_ended(pid)
+}
+
+/// A lock older than this without a heartbeat belongs to a process that stopped (on any
+/// machine: the holder touches it every `HEARTBEAT`).
+const STALE: std::time::Duration = std::time::Duration::from_secs(120);
+const HEARTBEAT: std::time::Duration = std::time::Duration::from_secs(20);
+
+/// Held while a process computes a unit (`<stage>/.lock-<key>`, naming `host pid`), so that
+/// runs sharing a cache (two local runs, the tasks of a cluster job) compute each unit once;
+/// a heartbeat keeps it fresh, and it is removed when dropped.
+pub struct UnitLock {
+    path: PathBuf,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    beat: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Drop for UnitLock {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(b) = self.beat.take() {
+            b.thread().unpark();
+            let _ = b.join();
+        }
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
 /// Hex SHA-256 of bytes.
 pub fn sha256(bytes: &[u8]) -> String {
     let digest = Sha256::digest(bytes);
@@ -170,7 +213,7 @@ impl Cache {
     ) -> Result<Entry, CacheError> {
         let parent = self.root.join(stage);
         std::fs::create_dir_all(&parent).map_err(io(&parent))?;
-        let tmp = parent.join(format!(".tmp-{}-{key}", std::process::id()));
+        let tmp = parent.join(format!(".tmp-{}-{key}-{}", std::process::id(), host()));
         if tmp.exists() {
             std::fs::remove_dir_all(&tmp).map_err(io(&tmp))?;
         }
@@ -199,6 +242,66 @@ impl Cache {
         Ok(Entry { dir, files: sums })
     }
 
+    /// Takes the compute lock of a unit, waiting while a live process holds it; `waiting` is
+    /// called once (with the holder) if it has to wait. A lock whose holder ended (this
+    /// machine) or whose heartbeat stopped (any machine, `STALE`) is taken over. The caller
+    /// looks the unit up again once it holds the lock: the holder may have finished it.
+    pub fn lock(
+        &self,
+        stage: &str,
+        key: &str,
+        waiting: &mut dyn FnMut(&str),
+    ) -> Result<UnitLock, CacheError> {
+        let parent = self.root.join(stage);
+        std::fs::create_dir_all(&parent).map_err(io(&parent))?;
+        let path = parent.join(format!(".lock-{key}"));
+        let mut said = false;
+        loop {
+            match std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&path)
+            {
+                Ok(mut file) => {
+                    use std::io::Write as _;
+                    writeln!(file, "{} {}", host(), std::process::id()).map_err(io(&path))?;
+                    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+                    let (flag, beat_path) = (stop.clone(), path.clone());
+                    let beat = std::thread::spawn(move || {
+                        while !flag.load(std::sync::atomic::Ordering::Relaxed) {
+                            std::thread::park_timeout(HEARTBEAT);
+                            if let Ok(f) = std::fs::File::options().write(true).open(&beat_path) {
+                                let _ = f.set_modified(std::time::SystemTime::now());
+                            }
+                        }
+                    });
+                    return Ok(UnitLock {
+                        path,
+                        stop,
+                        beat: Some(beat),
+                    });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let owner = std::fs::read_to_string(&path).unwrap_or_default();
+                    let age = std::fs::metadata(&path)
+                        .and_then(|m| m.modified())
+                        .ok()
+                        .and_then(|t| t.elapsed().ok());
+                    if owner_ended(&owner) || age.is_some_and(|a| a > STALE) {
+                        let _ = std::fs::remove_file(&path);
+                        continue;
+                    }
+                    if !said {
+                        waiting(owner.trim());
+                        said = true;
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(500));
+                }
+                Err(e) => return Err(io(&path)(e)),
+            }
+        }
+    }
+
     /// Removes temporary folders left by runs that were killed while writing an entry (their
     /// process id, in the folder's name, is no longer running). Folders of live runs stay.
     pub fn remove_stale(&self) {
@@ -211,11 +314,14 @@ impl Cache {
             };
             for e in entries.filter_map(Result::ok) {
                 let name = e.file_name().to_string_lossy().into_owned();
-                let pid = name
-                    .strip_prefix(".tmp-")
-                    .and_then(|rest| rest.split('-').next())
-                    .and_then(|p| p.parse::<u32>().ok());
-                if let Some(pid) = pid {
+                // `.tmp-<pid>-<key>-<host>` (entries from before hosts were named: this one).
+                let Some(rest) = name.strip_prefix(".tmp-") else {
+                    continue;
+                };
+                let mut parts = rest.splitn(3, '-');
+                let pid = parts.next().and_then(|p| p.parse::<u32>().ok());
+                let mine = parts.nth(1).is_none_or(|h| h == host());
+                if let (Some(pid), true) = (pid, mine) {
                     if process_ended(pid) && pid != std::process::id() {
                         let _ = std::fs::remove_dir_all(e.path());
                     }

@@ -257,6 +257,10 @@ impl Experiment for PoseTransfer {
         "pose_transfer"
     }
 
+    fn first_seed_only(&self) -> bool {
+        true
+    }
+
     fn wanted(&self, spec: &crate::spec::Spec) -> bool {
         ["table2", "headpose"]
             .iter()

@@ -192,14 +192,22 @@ impl Progress {
 }
 
 /// Computes a unit's artifact and stores it, saying so (as `name`) unless quiet; returns it
-/// with the seconds it took.
+/// with the seconds it took and whether it was found after all. The unit's compute lock is
+/// held meanwhile, so that runs sharing the cache compute it once: a run that finds it taken
+/// waits, then reads what the other run stored.
 fn store<T: Artifact>(
     cache: &Cache,
     name: &str,
     unit: &Unit,
     compute: impl FnOnce() -> Result<T>,
-) -> Result<(T, f64)> {
+) -> Result<(T, f64, bool)> {
     let t = Instant::now();
+    let _lock = cache.lock(unit.stage, &unit.key, &mut |owner| {
+        eprintln!("{name}: another run ({owner}) is computing it; waiting");
+    })?;
+    if let Some(value) = lookup(cache, name, unit)? {
+        return Ok((value, t.elapsed().as_secs_f64(), true));
+    }
     if verbosity() != Verbosity::Quiet {
         eprintln!("{name}: computing");
     }
@@ -209,7 +217,30 @@ fn store<T: Artifact>(
     if verbosity() != Verbosity::Quiet {
         eprintln!("{name}: done in {}", duration(seconds));
     }
-    Ok((value, seconds))
+    Ok((value, seconds, false))
+}
+
+/// The unit's artifact if the cache holds a complete entry; a damaged entry is named (it
+/// will be recomputed).
+fn lookup<T: Artifact>(cache: &Cache, name: &str, unit: &Unit) -> Result<Option<T>> {
+    match cache.get(unit.stage, &unit.key)? {
+        Lookup::Hit(entry) => {
+            let value = T::decode(&entry)
+                .with_context(|| format!("the cached {} in {}", unit.stage, entry.dir.display()))?;
+            if verbosity() == Verbosity::Verbose {
+                eprintln!("{name}: cached");
+            }
+            Ok(Some(value))
+        }
+        Lookup::Damaged { dir, reason } => {
+            eprintln!(
+                "{name}: the cached entry {} is damaged ({reason}); recomputing",
+                dir.display()
+            );
+            Ok(None)
+        }
+        Lookup::Missing => Ok(None),
+    }
 }
 
 /// "42 s", "3 min 20 s", "1 h 05 min".
@@ -262,8 +293,8 @@ impl<'a> Stages<'a> {
             return Ok(value);
         }
         let name = self.name(unit);
-        let (value, seconds) = store(self.cache, &name, unit, || compute(self))?;
-        self.record(unit, false, seconds);
+        let (value, seconds, hit) = store(self.cache, &name, unit, || compute(self))?;
+        self.record(unit, hit, seconds);
         Ok(value)
     }
 
@@ -286,12 +317,14 @@ impl<'a> Stages<'a> {
         let missing: Vec<usize> = (0..units.len()).filter(|&i| !hits[i]).collect();
         let names: Vec<String> = units.iter().map(|u| self.name(u)).collect();
         let cache = self.cache;
-        let computed: Vec<(usize, (T, f64))> = missing
+        let computed: Vec<(usize, (T, f64, bool))> = missing
             .par_iter()
             .map(|&i| Ok((i, store(cache, &names[i], &units[i], || compute(i))?)))
             .collect::<Result<_>>()?;
-        for (i, done) in computed {
-            found[i] = Some(done);
+        let mut hits = hits;
+        for (i, (value, seconds, hit)) in computed {
+            found[i] = Some((value, seconds));
+            hits[i] = hit;
         }
         let mut out = Vec::with_capacity(units.len());
         for ((unit, hit), slot) in units.iter().zip(hits).zip(found) {
@@ -302,29 +335,8 @@ impl<'a> Stages<'a> {
         Ok(out)
     }
 
-    /// The unit's artifact if the cache holds a complete entry; a damaged entry is named (it
-    /// will be recomputed).
     fn lookup<T: Artifact>(&self, unit: &Unit) -> Result<Option<T>> {
-        let name = self.name(unit);
-        match self.cache.get(unit.stage, &unit.key)? {
-            Lookup::Hit(entry) => {
-                let value = T::decode(&entry).with_context(|| {
-                    format!("the cached {} in {}", unit.stage, entry.dir.display())
-                })?;
-                if verbosity() == Verbosity::Verbose {
-                    eprintln!("{name}: cached");
-                }
-                Ok(Some(value))
-            }
-            Lookup::Damaged { dir, reason } => {
-                eprintln!(
-                    "{name}: the cached entry {} is damaged ({reason}); recomputing",
-                    dir.display()
-                );
-                Ok(None)
-            }
-            Lookup::Missing => Ok(None),
-        }
+        lookup(self.cache, &self.name(unit), unit)
     }
 
     /// Records what a unit did (a cache hit or a computation) and how long it took.

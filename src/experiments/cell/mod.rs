@@ -51,6 +51,12 @@ pub(crate) trait Experiment: Sync {
         true
     }
 
+    /// Whether only the first seed feeds it (a cluster's task for a further seed leaves it
+    /// out).
+    fn first_seed_only(&self) -> bool {
+        false
+    }
+
     /// The units of work it adds to a cell's plan, in the order a run meets them, with keys
     /// computed by the same functions its stages use.
     fn plan(&self, plan: &mut Plan) -> Result<()>;
@@ -298,6 +304,9 @@ pub(crate) struct Plan<'a> {
     pub(crate) spec: &'a Spec,
     pub(crate) assets: &'a Assets,
     pub(crate) cache: &'a Cache,
+    /// Whether the run writes tables and figures (a single-cell spec): their own units
+    /// (Table 2's renders) are planned only then.
+    pub(crate) publishes: bool,
     cell: &'a str,
     keys: Option<Keys>,
     pub(crate) units: Vec<Planned>,
@@ -312,6 +321,7 @@ impl<'a> Plan<'a> {
         assets: &'a Assets,
         cache: &'a Cache,
         experiments: &[&dyn Experiment],
+        publishes: bool,
     ) -> Result<Vec<Planned>> {
         let wanted: Vec<&dyn Experiment> = experiments
             .iter()
@@ -327,6 +337,7 @@ impl<'a> Plan<'a> {
             spec,
             assets,
             cache,
+            publishes,
             cell,
             keys,
             units: Vec::new(),

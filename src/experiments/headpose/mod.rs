@@ -215,6 +215,10 @@ impl Experiment for Headpose {
         "headpose"
     }
 
+    fn first_seed_only(&self) -> bool {
+        true
+    }
+
     fn trains(&self) -> bool {
         false
     }

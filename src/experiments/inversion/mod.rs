@@ -530,6 +530,10 @@ impl Experiment for Inversion {
         "inversion"
     }
 
+    fn first_seed_only(&self) -> bool {
+        true
+    }
+
     fn plan(&self, plan: &mut Plan) -> Result<()> {
         let (spec, a) = (plan.spec, plan.assets);
         let cohort = cohort_unit(spec, &a.face, &a.data(spec)?);

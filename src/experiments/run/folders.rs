@@ -150,12 +150,10 @@ impl Drop for PublishLock {
 pub(super) const PARTIAL: &str = ".partial";
 
 /// The file in a `.partial` folder naming the run that owns it: `host pid`.
-const OWNER: &str = ".owner";
+pub(super) const OWNER: &str = ".owner";
 
 fn host() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .map(|h| h.trim().to_string())
-        .unwrap_or_else(|_| "unknown".into())
+    crate::cache::host()
 }
 
 /// Whether the run that owns a `.partial` folder is gone: its process is not running on this
@@ -174,11 +172,7 @@ fn owner_is_gone(partial: &Path) -> bool {
 /// Whether the process an owner line (`host pid`) names has ended: only a process of this
 /// machine is judged.
 fn owner_ended(owner: &str) -> bool {
-    let mut words = owner.split_whitespace();
-    let (Some(owner_host), Some(pid)) = (words.next(), words.next()) else {
-        return false;
-    };
-    owner_host == host() && crate::cache::process_ended(pid)
+    crate::cache::owner_ended(owner)
 }
 
 /// Removes the `.partial` folders of runs that died (killed, crashed) before finishing, saying

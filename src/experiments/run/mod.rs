@@ -23,8 +23,10 @@ use crate::io::atomic::write_atomic;
 use crate::spec;
 
 mod folders;
+mod slurm;
 
 use folders::*;
+pub use slurm::{launch, task, Launched};
 
 #[derive(Clone, Debug)]
 pub struct RunOptions {
@@ -36,6 +38,21 @@ pub struct RunOptions {
     /// With `sets`: also write the tables and figures beside the results folder. Without it an
     /// overridden run keeps them in its own run folder and the committed record is untouched.
     pub publish: bool,
+    /// The final job of a Slurm run: finish this (`.partial`) run folder, which the launcher
+    /// made, once every task's units are in the cache (else name the missing ones).
+    pub assemble: Option<PathBuf>,
+}
+
+/// Where a spec's run runs: `--launcher` if given, else the spec's `[launcher] kind`.
+pub fn launcher_of(
+    spec_path: &Path,
+    sets: &[String],
+    given: Option<spec::LauncherKind>,
+) -> Result<spec::LauncherKind> {
+    match given {
+        Some(kind) => Ok(kind),
+        None => Ok(spec::load(spec_path, sets)?[0].spec.launcher.kind),
+    }
 }
 
 pub use super::stage::StageRecord;
@@ -103,7 +120,13 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         out_root.join("paper-tables"),
     ]);
     let latest_at_start = std::fs::read_link(experiment_dir.join("latest")).ok();
-    let run_dir = new_run_dir(&experiment_dir)?;
+    let run_dir = match &opts.assemble {
+        Some(dir) => {
+            slurm::check_assembled(dir, &cells, &a, &cache)?;
+            dir.clone()
+        }
+        None => new_run_dir(&experiment_dir)?,
+    };
     // An overridden run is not the committed record: its tables and figures stay in its run
     // folder (and say what was overridden) unless `--publish` asks otherwise.
     // A published run's tables and figures are staged in its folder and copied out at the end,
@@ -187,6 +210,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         "experiment": experiment,
         "seeds": cells[0].spec.seeds,
         "threads": opts.threads,
+        "launcher": slurm::record(&run_dir),
         "stages": records.iter().map(|r| serde_json::json!({
             "cell": r.cell, "stage": r.stage, "key": r.key, "hit": r.hit, "seconds": r.seconds,
         })).collect::<Vec<_>>(),
@@ -233,6 +257,11 @@ pub enum UnitState {
     Damaged(String),
     /// The key is not known until an earlier stage is cached (the reason).
     Waiting(String),
+    /// Not cached; a submitted Slurm task will make it (which task and job).
+    Queued(String),
+    Running(String),
+    /// Not cached, and the Slurm task that was to make it ended without finishing.
+    Failed(String),
 }
 
 /// One line of `facelab status`.
@@ -250,14 +279,28 @@ pub fn status(spec_path: &Path, sets: &[String], results: &Path) -> Result<Vec<S
     let cells = spec::load(spec_path, sets)?;
     let a = assets()?;
     let cache = Cache::new(&results.join(".cache"));
+    let slurm = slurm::unit_states(results, &cells[0].spec.experiment);
     let mut out = Vec::new();
     for cell in &cells {
-        let plan = Plan::of(&cell.spec, &cell.name, &a, &cache, EXPERIMENTS)?;
+        let plan = Plan::of(
+            &cell.spec,
+            &cell.name,
+            &a,
+            &cache,
+            EXPERIMENTS,
+            cells.len() == 1,
+        )?;
         for p in plan {
             let state = match &p.unit {
                 Ok(u) => match cache.inspect(u.stage, &u.key) {
                     crate::cache::Lookup::Hit(_) => UnitState::Cached,
-                    crate::cache::Lookup::Missing => UnitState::Missing,
+                    crate::cache::Lookup::Missing => {
+                        let id = format!("{}/{}", u.stage, u.key);
+                        slurm
+                            .iter()
+                            .find(|(unit, _)| *unit == id)
+                            .map_or(UnitState::Missing, |(_, s)| s.clone())
+                    }
                     crate::cache::Lookup::Damaged { reason, .. } => UnitState::Damaged(reason),
                 },
                 Err(why) => UnitState::Waiting(why.clone()),
@@ -306,6 +349,7 @@ pub fn verify(run_dir: &Path, threads: usize) -> Result<Vec<String>> {
                 sets: Vec::new(),
                 threads,
                 publish: false,
+                assemble: None,
             },
         );
         let summary = match summary {

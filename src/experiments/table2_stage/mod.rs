@@ -57,6 +57,8 @@ pub struct Inputs<'a> {
     pub model: &'a FaceModel,
     pub basis: Option<&'a LinearBasis>,
     pub calibration: &'a Calibration,
+    /// Whether to render the first seed's transfers (for the figures).
+    pub renders: bool,
 }
 
 pub struct Table2Result {
@@ -95,7 +97,7 @@ impl Experiment for Table2 {
         for (seed, t) in transfers {
             plan.add(format!("transfer seed {seed}"), t);
         }
-        if let Some(first) = first {
+        if let (Some(first), true) = (first, plan.publishes) {
             plan.add("renders", renders_unit(&first));
         }
         if let Some(file) = &spec.table2_openface {
@@ -121,6 +123,7 @@ impl Experiment for Table2 {
             model: &model,
             basis: basis.as_ref().as_ref(),
             calibration: &calibration,
+            renders: cx.figures("table2").is_some(),
         };
         let t2 = run(&inputs, &mut cx.stages())?;
         // The committed real file through every seed's network, reported beside the cohorts.
@@ -403,10 +406,15 @@ pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
     }
     let first = first.context("Table 2 needs at least one seed")?;
 
-    // Renders of the first seed.
-    let Files(renders) = stages.get_or_compute(&renders_unit(&first_key), |_| {
-        Ok(Files(renders(inp, &reference_frames, &first, &params)?))
-    })?;
+    // Renders of the first seed, for the figures.
+    let renders = if inp.renders {
+        let Files(r) = stages.get_or_compute(&renders_unit(&first_key), |_| {
+            Ok(Files(renders(inp, &reference_frames, &first, &params)?))
+        })?;
+        r
+    } else {
+        Vec::new()
+    };
     Ok(Table2Result {
         cohort_key,
         rows,

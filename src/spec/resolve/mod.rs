@@ -22,6 +22,7 @@ mod sections;
 mod sweep;
 
 use sections::*;
+pub use sections::{LauncherKind, LauncherParams};
 pub use sweep::cells;
 
 /// The tables a spec can ask for.
@@ -62,6 +63,8 @@ pub struct Spec {
     pub headpose: HeadposeParams,
     /// The real-data table (`[realfaces]`), used when `tables` has "realfaces".
     pub realfaces: RealfacesParams,
+    /// Where the run's units of work run (`[launcher]`).
+    pub launcher: LauncherParams,
     /// Prefix of the paper-table and figure names (`report.prefix`), so a smoke or test run
     /// does not overwrite the committed `paper-tables/table1.md`. Default "".
     pub report_prefix: String,
@@ -483,8 +486,10 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         "report.prefix".into(),
         toml::Value::String(report_prefix.clone()),
     );
+    let launcher = read_launcher(&mut r)?;
     let values = r.finish()?;
     Ok(Spec {
+        launcher,
         report_prefix,
         experiment,
         seeds,

@@ -198,3 +198,90 @@ pub(super) fn read_headpose(r: &mut Reader) -> Result<HeadposeParams, SpecError>
         },
     })
 }
+
+/// Where a run's units of work run (`[launcher]`, or `facelab run --launcher`): on this
+/// machine, or as Slurm jobs. Not a result: never recorded in a run's `spec.toml` (the
+/// manifest records it), so the same spec gives the same outputs however it ran.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LauncherParams {
+    pub kind: LauncherKind,
+    /// `sbatch --partition`.
+    pub partition: Option<String>,
+    /// `sbatch --time` (Slurm's formats: `MM`, `HH:MM:SS`, `D-HH`...).
+    pub time: Option<String>,
+    /// `sbatch --cpus-per-task` (default 2).
+    pub cpus_per_task: Option<u32>,
+    /// `sbatch --mem` (e.g. `4G`).
+    pub mem: Option<String>,
+    /// `sbatch --account`.
+    pub account: Option<String>,
+    /// Further `sbatch` options, passed as they are (e.g. `["--qos=short"]`).
+    pub sbatch: Vec<String>,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LauncherKind {
+    #[default]
+    Local,
+    Slurm,
+}
+
+impl LauncherKind {
+    pub fn parse(s: &str) -> Option<LauncherKind> {
+        match s {
+            "local" => Some(LauncherKind::Local),
+            "slurm" => Some(LauncherKind::Slurm),
+            _ => None,
+        }
+    }
+}
+
+pub(super) fn read_launcher(r: &mut Reader) -> Result<LauncherParams, SpecError> {
+    let kind = LauncherKind::parse(&r.choice("launcher.kind", "local", &["local", "slurm"])?)
+        .expect("choice checked");
+    let text = |r: &mut Reader, key: &str| -> Result<Option<String>, SpecError> {
+        match r.get(key) {
+            None => Ok(None),
+            Some(node) => match &node.value {
+                Value::String(s) if !s.is_empty() && !s.contains(char::is_whitespace) => {
+                    Ok(Some(s.clone()))
+                }
+                _ => Err(r.invalid(node, key, "must be a non-empty word".into())),
+            },
+        }
+    };
+    let partition = text(r, "launcher.partition")?;
+    let time = text(r, "launcher.time")?;
+    let mem = text(r, "launcher.mem")?;
+    let account = text(r, "launcher.account")?;
+    let cpus_per_task = match r.get("launcher.cpus_per_task") {
+        None => None,
+        Some(_) => Some(r.integer("launcher.cpus_per_task", 2, 1, 4096)? as u32),
+    };
+    let mut sbatch = Vec::new();
+    if r.get("launcher.sbatch").is_some() {
+        for node in r.list("launcher.sbatch", Vec::new())? {
+            match &node.value {
+                Value::String(s) if s.starts_with('-') => sbatch.push(s.clone()),
+                _ => {
+                    return Err(r.invalid(
+                        node,
+                        "launcher.sbatch",
+                        "must list sbatch options as strings (\"--qos=short\")".into(),
+                    ))
+                }
+            }
+        }
+    }
+    // Where a run runs is not what it computes: kept out of the recorded spec.
+    r.values.retain(|k, _| !k.starts_with("launcher."));
+    Ok(LauncherParams {
+        kind,
+        partition,
+        time,
+        cpus_per_task,
+        mem,
+        account,
+        sbatch,
+    })
+}
