@@ -161,7 +161,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             };
             let kind = run::launcher_of(&spec, &opts.sets, given)?;
             if kind == facelab::spec::LauncherKind::Slurm && opts.assemble.is_none() {
-                let l = run::launch(&spec, &opts, wait)?;
+                let l = run::launch(&spec, &opts)?;
                 let job = |j: &Option<String>| j.clone().unwrap_or_else(|| "-".into());
                 println!(
                     "submitted {} task(s) ({} cached, not submitted): cells array {}, seeds \
@@ -173,6 +173,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     l.final_job,
                     l.run_dir.display()
                 );
+                if wait {
+                    run::wait(&l)?;
+                }
                 return Ok(());
             }
             if wait {

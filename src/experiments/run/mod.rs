@@ -26,7 +26,7 @@ mod folders;
 mod slurm;
 
 use folders::*;
-pub use slurm::{launch, task, Launched};
+pub use slurm::{launch, task, wait, Launched};
 
 #[derive(Clone, Debug)]
 pub struct RunOptions {

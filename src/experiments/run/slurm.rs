@@ -220,9 +220,8 @@ fn read_launch(path: &Path) -> Result<Launch> {
     serde_json::from_str(&text).with_context(|| format!("{}: not a launch record", path.display()))
 }
 
-/// Submits a spec's run as Slurm jobs (see the module's documentation); with `wait`, blocks
-/// until the final job ended and fails naming each failed task and its log.
-pub fn launch(spec_path: &Path, opts: &RunOptions, wait: bool) -> Result<Launched> {
+/// Submits a spec's run as Slurm jobs (see the module's documentation).
+pub fn launch(spec_path: &Path, opts: &RunOptions) -> Result<Launched> {
     require_slurm()?;
     let cells = spec::load(spec_path, &opts.sets)?;
     let a = assets()?;
@@ -329,18 +328,14 @@ pub fn launch(spec_path: &Path, opts: &RunOptions, wait: bool) -> Result<Launche
     let owner = run_dir.join(OWNER);
     std::fs::write(&owner, format!("slurm {final_job}\n"))
         .with_context(|| format!("{}: cannot write", owner.display()))?;
-    let launched = Launched {
+    Ok(Launched {
         run_dir: run_dir.clone(),
         cells_job,
         seeds_job,
-        final_job: final_job.clone(),
+        final_job,
         tasks: launch.tasks.len(),
         skipped,
-    };
-    if wait {
-        wait_for(&launched, &launch, &experiment_dir)?;
-    }
-    Ok(launched)
+    })
 }
 
 /// Jobs still in Slurm's queue, by id (`squeue -h -r`: one line per array task, `123_4`),
@@ -378,7 +373,14 @@ fn log_path(run_dir: &Path, t: &Task) -> PathBuf {
     logs(run_dir).join(format!("{}.log", t.name()))
 }
 
-fn wait_for(launched: &Launched, launch: &Launch, experiment_dir: &Path) -> Result<()> {
+/// Blocks until a submission's final job ended; fails naming each task that did not finish
+/// (with its job and log) and the final job's log.
+pub fn wait(launched: &Launched) -> Result<()> {
+    let launch = read_launch(&logs(&launched.run_dir).join("launch.json"))?;
+    let experiment_dir = launched
+        .run_dir
+        .parent()
+        .context("a run folder has its experiment's folder")?;
     let started = Instant::now();
     eprintln!(
         "waiting for Slurm: {} task(s), final job {}",
@@ -415,7 +417,7 @@ fn wait_for(launched: &Launched, launch: &Launch, experiment_dir: &Path) -> Resu
             format!(
                 "{} failed (job {}), log {}",
                 t.describe(),
-                task_job(launch, t).unwrap_or_default(),
+                task_job(&launch, t).unwrap_or_default(),
                 log_path(&launched.run_dir, t).display()
             )
         })
