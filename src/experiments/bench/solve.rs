@@ -224,6 +224,85 @@ pub fn bench_solve(
             fallbacks as f64,
             "count",
         )?;
+        // Chains, as the dataset could solve a chunk: per expression, draws of s and jaw
+        // (4 x the batch over the six), ordered by `dataset::path`, each from the one before
+        // by continuation; against the same draws each from the basis prediction.
+        if level == 0 {
+            let mut rng = stream(seed, "bench/solve/chains");
+            let per = (4 * count / 6).max(2);
+            let (mut independent, mut chained) = (0.0, 0.0);
+            let (mut colds, mut drawn) = (0usize, 0usize);
+            let (mut chain_apart, mut chain_off) = (0.0f64, 0usize);
+            for e in crate::sim::expression::Expression::ALL {
+                let draws: Vec<_> = (0..per)
+                    .map(|_| {
+                        let (s, jaw) = (rng.uniform(), rng.uniform());
+                        weights.sample(e, s, jaw)
+                    })
+                    .collect();
+                drawn += draws.len();
+                let t = Instant::now();
+                let mut alone = Vec::with_capacity(per);
+                for a in &draws {
+                    alone.push(solve_predicted(&model, &basis, a, &mut ws, &params)?.0);
+                }
+                independent += t.elapsed().as_secs_f64();
+                let order = crate::dataset::path(&draws);
+                let mut solved: Vec<Option<crate::sim::State>> = vec![None; per];
+                let t = Instant::now();
+                let cold = |a: &crate::sim::Activations, ws: &mut Workspace| {
+                    colds += 1;
+                    solve_predicted(&model, &basis, a, ws, &params)
+                };
+                crate::dataset::solve_path(
+                    &model,
+                    &draws,
+                    &order,
+                    cold,
+                    &mut ws,
+                    &params,
+                    |i, s| {
+                        solved[i] = Some(s?.clone());
+                        Ok(())
+                    },
+                )?;
+                chained += t.elapsed().as_secs_f64();
+                for (a, b) in alone.iter().zip(&solved) {
+                    let b = b.as_ref().expect("every draw solved");
+                    let d = landmark_error(a.surface(n), b.surface(n)).1;
+                    chain_apart = chain_apart.max(d);
+                    chain_off += usize::from(d > 1e-5);
+                }
+            }
+            let c = "solve.chain.sub0";
+            line(out, &format!("{c}.samples"), drawn as f64, "count")?;
+            line(
+                out,
+                &format!("{c}.predicted_ms_per_sample"),
+                independent * 1e3 / drawn as f64,
+                "ms",
+            )?;
+            line(
+                out,
+                &format!("{c}.chained_ms_per_sample"),
+                chained * 1e3 / drawn as f64,
+                "ms",
+            )?;
+            line(out, &format!("{c}.cold_starts"), colds as f64, "count")?;
+            line(
+                out,
+                &format!("{c}.chained_vs_predicted_landmark_max_mm"),
+                chain_apart * 1e3,
+                "mm",
+            )?;
+            line(
+                out,
+                &format!("{c}.samples_over_0.01_mm_apart"),
+                chain_off as f64,
+                "count",
+            )?;
+        }
+
         let mut apart = 0.0f64;
         for (a, b) in predicted_states.iter().zip(&states) {
             apart = apart.max(landmark_error(a.surface(n), b.surface(n)).1);
