@@ -57,16 +57,17 @@ pub fn owner_ended(owner: &str) -> bool {
 const STALE: std::time::Duration = std::time::Duration::from_secs(120);
 const HEARTBEAT: std::time::Duration = std::time::Duration::from_secs(20);
 
-/// Held while a process computes a unit (`<stage>/.lock-<key>`, naming `host pid`), so that
-/// runs sharing a cache (two local runs, the tasks of a cluster job) compute each unit once;
-/// a heartbeat keeps it fresh, and it is removed when dropped.
-pub struct UnitLock {
+/// A lock file naming its owner (`host pid`), held until dropped: a unit's compute lock in
+/// the cache (`<stage>/.lock-<key>`), so that runs sharing a cache (two local runs, the tasks
+/// of a cluster job) compute each unit once, and a results folder's publish lock. A heartbeat
+/// thread keeps the file's time fresh; the file is removed when the lock is dropped.
+pub struct OwnerLock {
     path: PathBuf,
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     beat: Option<std::thread::JoinHandle<()>>,
 }
 
-impl Drop for UnitLock {
+impl Drop for OwnerLock {
     fn drop(&mut self) {
         self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
         if let Some(b) = self.beat.take() {
@@ -74,6 +75,65 @@ impl Drop for UnitLock {
             let _ = b.join();
         }
         let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+impl OwnerLock {
+    /// Creates the lock file `path`, waiting while a live owner holds it: `waiting(owner)` is
+    /// called once if it has to wait. A lock whose owner ended (this machine) or whose
+    /// heartbeat stopped (any machine, `STALE`) is removed, saying so by `taken_over(owner)`,
+    /// and taken.
+    pub fn acquire(
+        path: &Path,
+        waiting: &mut dyn FnMut(&str),
+        taken_over: &mut dyn FnMut(&str),
+    ) -> Result<OwnerLock, CacheError> {
+        let mut said = false;
+        loop {
+            match std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(path)
+            {
+                Ok(mut file) => {
+                    use std::io::Write as _;
+                    writeln!(file, "{} {}", host(), std::process::id()).map_err(io(path))?;
+                    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+                    let (flag, beat_path) = (stop.clone(), path.to_path_buf());
+                    let beat = std::thread::spawn(move || {
+                        while !flag.load(std::sync::atomic::Ordering::Relaxed) {
+                            std::thread::park_timeout(HEARTBEAT);
+                            if let Ok(f) = std::fs::File::options().write(true).open(&beat_path) {
+                                let _ = f.set_modified(std::time::SystemTime::now());
+                            }
+                        }
+                    });
+                    return Ok(OwnerLock {
+                        path: path.to_path_buf(),
+                        stop,
+                        beat: Some(beat),
+                    });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let owner = std::fs::read_to_string(path).unwrap_or_default();
+                    let age = std::fs::metadata(path)
+                        .and_then(|m| m.modified())
+                        .ok()
+                        .and_then(|t| t.elapsed().ok());
+                    if owner_ended(&owner) || age.is_some_and(|a| a > STALE) {
+                        taken_over(owner.trim());
+                        let _ = std::fs::remove_file(path);
+                        continue;
+                    }
+                    if !said {
+                        waiting(owner.trim());
+                        said = true;
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(100));
+                }
+                Err(e) => return Err(io(path)(e)),
+            }
+        }
     }
 }
 
@@ -242,64 +302,18 @@ impl Cache {
         Ok(Entry { dir, files: sums })
     }
 
-    /// Takes the compute lock of a unit, waiting while a live process holds it; `waiting` is
-    /// called once (with the holder) if it has to wait. A lock whose holder ended (this
-    /// machine) or whose heartbeat stopped (any machine, `STALE`) is taken over. The caller
-    /// looks the unit up again once it holds the lock: the holder may have finished it.
+    /// Takes the compute lock of a unit (`OwnerLock`), waiting while a live process holds
+    /// it; `waiting` is called once (with the holder) if it has to wait. The caller looks the
+    /// unit up again once it holds the lock: the holder may have finished it.
     pub fn lock(
         &self,
         stage: &str,
         key: &str,
         waiting: &mut dyn FnMut(&str),
-    ) -> Result<UnitLock, CacheError> {
+    ) -> Result<OwnerLock, CacheError> {
         let parent = self.root.join(stage);
         std::fs::create_dir_all(&parent).map_err(io(&parent))?;
-        let path = parent.join(format!(".lock-{key}"));
-        let mut said = false;
-        loop {
-            match std::fs::OpenOptions::new()
-                .write(true)
-                .create_new(true)
-                .open(&path)
-            {
-                Ok(mut file) => {
-                    use std::io::Write as _;
-                    writeln!(file, "{} {}", host(), std::process::id()).map_err(io(&path))?;
-                    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-                    let (flag, beat_path) = (stop.clone(), path.clone());
-                    let beat = std::thread::spawn(move || {
-                        while !flag.load(std::sync::atomic::Ordering::Relaxed) {
-                            std::thread::park_timeout(HEARTBEAT);
-                            if let Ok(f) = std::fs::File::options().write(true).open(&beat_path) {
-                                let _ = f.set_modified(std::time::SystemTime::now());
-                            }
-                        }
-                    });
-                    return Ok(UnitLock {
-                        path,
-                        stop,
-                        beat: Some(beat),
-                    });
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let owner = std::fs::read_to_string(&path).unwrap_or_default();
-                    let age = std::fs::metadata(&path)
-                        .and_then(|m| m.modified())
-                        .ok()
-                        .and_then(|t| t.elapsed().ok());
-                    if owner_ended(&owner) || age.is_some_and(|a| a > STALE) {
-                        let _ = std::fs::remove_file(&path);
-                        continue;
-                    }
-                    if !said {
-                        waiting(owner.trim());
-                        said = true;
-                    }
-                    std::thread::sleep(std::time::Duration::from_millis(500));
-                }
-                Err(e) => return Err(io(&path)(e)),
-            }
-        }
+        OwnerLock::acquire(&parent.join(format!(".lock-{key}")), waiting, &mut |_| {})
     }
 
     /// Removes temporary folders left by runs that were killed while writing an entry (their
@@ -334,6 +348,42 @@ impl Cache {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A second holder waits until the first lock is dropped; a lock whose owner ended is
+    /// taken over at once, saying whose it was.
+    #[test]
+    fn an_owner_lock_waits_for_a_live_owner_and_takes_over_a_dead_one() {
+        let root = std::env::temp_dir().join(format!("facelab-lock-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        std::fs::create_dir_all(&root).unwrap();
+        let path = root.join(".lock-k");
+        let first = OwnerLock::acquire(&path, &mut |_| panic!("free"), &mut |_| {}).unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let p = path.clone();
+        let second = std::thread::spawn(move || {
+            let mut waited = String::new();
+            let lock =
+                OwnerLock::acquire(&p, &mut |o| waited = o.to_string(), &mut |_| {}).unwrap();
+            tx.send(waited).unwrap();
+            drop(lock);
+        });
+        assert!(rx
+            .recv_timeout(std::time::Duration::from_millis(400))
+            .is_err());
+        drop(first);
+        let waited = rx.recv_timeout(std::time::Duration::from_secs(5)).unwrap();
+        assert_eq!(waited, format!("{} {}", host(), std::process::id()));
+        second.join().unwrap();
+        assert!(!path.exists());
+        // A dead owner on this machine (no such process).
+        std::fs::write(&path, format!("{} 4000000000\n", host())).unwrap();
+        let mut gone = String::new();
+        let lock = OwnerLock::acquire(&path, &mut |_| panic!("dead"), &mut |o| gone = o.into());
+        assert!(lock.is_ok());
+        assert_eq!(gone, format!("{} 4000000000", host()));
+        drop(lock);
+        let _ = std::fs::remove_dir_all(&root);
+    }
 
     #[test]
     fn damaged_entry_is_dropped_and_a_good_one_kept() {

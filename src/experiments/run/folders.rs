@@ -87,62 +87,32 @@ pub(super) fn new_run_dir(experiment_dir: &Path) -> Result<PathBuf> {
     }
 }
 
-/// Held while a run publishes into a results folder (`<results>/.publish.lock`, naming its
-/// owner as `host pid`); removed when dropped. A lock whose owner has ended (a killed run) is
-/// taken over.
+/// Held while a run publishes into a results folder (`<results>/.publish.lock`, a
+/// `cache::OwnerLock`); a lock whose owner has ended (a killed run) is taken over.
 pub(super) struct PublishLock {
-    path: PathBuf,
+    _held: crate::cache::OwnerLock,
 }
 
 impl PublishLock {
     /// Takes the lock, waiting (and saying so once) while a live run holds it.
     pub(super) fn acquire(results: &Path) -> Result<PublishLock> {
         let path = results.join(".publish.lock");
-        let mut said = false;
-        loop {
-            match std::fs::OpenOptions::new()
-                .write(true)
-                .create_new(true)
-                .open(&path)
-            {
-                Ok(mut file) => {
-                    use std::io::Write as _;
-                    writeln!(file, "{} {}", host(), std::process::id())
-                        .with_context(|| format!("{}: cannot write", path.display()))?;
-                    return Ok(PublishLock { path });
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let owner = std::fs::read_to_string(&path).unwrap_or_default();
-                    if owner_ended(&owner) {
-                        eprintln!(
-                            "{}: its run ({}) stopped while publishing; taking it over",
-                            path.display(),
-                            owner.trim()
-                        );
-                        let _ = std::fs::remove_file(&path);
-                        continue;
-                    }
-                    if !said {
-                        eprintln!(
-                            "{}: another run ({}) is publishing its tables; waiting for it",
-                            path.display(),
-                            owner.trim()
-                        );
-                        said = true;
-                    }
-                    std::thread::sleep(std::time::Duration::from_millis(100));
-                }
-                Err(e) => {
-                    return Err(e).with_context(|| format!("{}: cannot create", path.display()))
-                }
-            }
-        }
-    }
-}
-
-impl Drop for PublishLock {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.path);
+        let lock = crate::cache::OwnerLock::acquire(
+            &path,
+            &mut |owner| {
+                eprintln!(
+                    "{}: another run ({owner}) is publishing its tables; waiting for it",
+                    path.display()
+                )
+            },
+            &mut |owner| {
+                eprintln!(
+                    "{}: its run ({owner}) stopped while publishing; taking it over",
+                    path.display()
+                )
+            },
+        )?;
+        Ok(PublishLock { _held: lock })
     }
 }
 
