@@ -83,6 +83,7 @@ impl Cluster {
         if String::from_utf8_lossy(&id.stdout).trim() != "0" {
             return Err("slurmd runs as root, and this test is not root".into());
         }
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         // munge: use the running daemon, or start one.
         let munge_works = || {
             Command::new("sh")
