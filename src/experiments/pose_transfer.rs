@@ -19,7 +19,7 @@ use crate::cohort::{CohortKind, CohortParams};
 use crate::experiments::cell::{CellRun, Experiment, Plan};
 use crate::experiments::headpose::{self, VoluntaryWeights};
 use crate::experiments::stage::{text, Artifact, Stages, Unit};
-use crate::experiments::table2_stage::{cohort_unit, Table2Result};
+use crate::experiments::table2_stage::{planned_cohort, Table2Result};
 use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Mlp;
 use crate::report::table::{Table, TableRow};
@@ -268,8 +268,8 @@ impl Experiment for PoseTransfer {
     }
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {
-        let (spec, a) = (plan.spec, plan.assets);
-        let cohort = cohort_unit(spec, &a.face, &a.data(spec)?);
+        let spec = plan.spec;
+        let cohort = planned_cohort(plan)?;
         let train = headpose::train_unit(spec, &headpose::data_unit(spec).key);
         match plan.cache.inspect(train.stage, &train.key) {
             Lookup::Hit(e) => {

@@ -313,7 +313,7 @@ impl<'a> Stages<'a> {
             let t = Instant::now();
             found.push(self.lookup(unit)?.map(|v| (v, t.elapsed().as_secs_f64())));
         }
-        let hits: Vec<bool> = found.iter().map(Option::is_some).collect();
+        let mut hits: Vec<bool> = found.iter().map(Option::is_some).collect();
         let missing: Vec<usize> = (0..units.len()).filter(|&i| !hits[i]).collect();
         let names: Vec<String> = units.iter().map(|u| self.name(u)).collect();
         let cache = self.cache;
@@ -321,7 +321,6 @@ impl<'a> Stages<'a> {
             .par_iter()
             .map(|&i| Ok((i, store(cache, &names[i], &units[i], || compute(i))?)))
             .collect::<Result<_>>()?;
-        let mut hits = hits;
         for (i, (value, seconds, hit)) in computed {
             found[i] = Some((value, seconds));
             hits[i] = hit;

@@ -161,22 +161,18 @@ impl<'a> CellRun<'a> {
 
     /// The keys of the cell's basis, dataset and training stages.
     pub(crate) fn keys(&mut self) -> Result<Rc<Keys>> {
-        if self.keys.is_none() {
-            self.keys = Some(Rc::new(keys(self.spec, self.assets)?));
-        }
-        Ok(self.keys.clone().expect("set above"))
+        let (spec, assets) = (self.spec, self.assets);
+        once(&mut self.keys, || keys(spec, assets))
     }
 
     /// The cell's data set and trained networks, computed (through the cache) on first use.
     pub(crate) fn networks(&mut self) -> Result<Rc<Networks>> {
-        if let Some(n) = &self.networks {
-            return Ok(n.clone());
-        }
         let k = self.keys()?;
         let (spec, assets) = (self.spec, self.assets);
-        let n = Rc::new(networks::networks(spec, assets, &k, &mut self.stages())?);
-        self.networks = Some(n.clone());
-        Ok(n)
+        let mut stages = Stages::new(self.cache, self.cell, self.records);
+        once(&mut self.networks, || {
+            networks::networks(spec, assets, &k, &mut stages)
+        })
     }
 
     /// The networks, if an experiment of the cell asked for them.
@@ -186,21 +182,18 @@ impl<'a> CellRun<'a> {
 
     /// The cell's face model.
     pub(crate) fn model(&mut self) -> Result<Rc<FaceModel>> {
-        if self.model.is_none() {
-            self.model = Some(Rc::new(FaceSource::of_spec(self.spec).model()?));
-        }
-        Ok(self.model.clone().expect("set above"))
+        let spec = self.spec;
+        once(&mut self.model, || FaceSource::of_spec(spec).model())
     }
 
     /// The linear basis of the cell's face (cached), when the spec solves from predictions
     /// or inverts.
     pub(crate) fn basis(&mut self) -> Result<Rc<Option<LinearBasis>>> {
-        if self.basis.is_none() {
-            let (k, model, spec) = (self.keys()?, self.model()?, self.spec);
-            let basis = networks::load_basis(&k, &mut self.stages(), &model, spec)?;
-            self.basis = Some(Rc::new(basis));
-        }
-        Ok(self.basis.clone().expect("set above"))
+        let (k, model, spec) = (self.keys()?, self.model()?, self.spec);
+        let mut stages = Stages::new(self.cache, self.cell, self.records);
+        once(&mut self.basis, || {
+            networks::load_basis(&k, &mut stages, &model, spec)
+        })
     }
 
     /// Whether the cell is the whole spec: only then does it write tables and figures (a
@@ -238,6 +231,16 @@ impl<'a> CellRun<'a> {
                 .join(format!("{}{name}", self.spec.report_prefix))
         })
     }
+}
+
+/// What `slot` holds, made by `make` and kept there on first use.
+fn once<T>(slot: &mut Option<Rc<T>>, make: impl FnOnce() -> Result<T>) -> Result<Rc<T>> {
+    if let Some(v) = slot {
+        return Ok(v.clone());
+    }
+    let v = Rc::new(make()?);
+    *slot = Some(v.clone());
+    Ok(v)
 }
 
 /// A sweep's summary, written after all its cells ran.

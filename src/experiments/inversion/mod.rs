@@ -31,7 +31,7 @@ use crate::cohort::{CohortKind, CohortParams, Subject};
 use crate::experiments::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::experiments::table2::{predict_activations, range_map, training_range, RefFrame};
-use crate::experiments::table2_stage::{cohort_unit, Table2Result};
+use crate::experiments::table2_stage::{planned_cohort, Table2Result};
 use crate::invert::{accelerated, au_fit, Bound, BoxQp, InversionParams, Solution};
 use crate::learn::{Mlp, Normalization};
 use crate::observe::au::AU_MAX;
@@ -535,8 +535,8 @@ impl Experiment for Inversion {
     }
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {
-        let (spec, a) = (plan.spec, plan.assets);
-        let cohort = cohort_unit(spec, &a.face, &a.data(spec)?);
+        let spec = plan.spec;
+        let cohort = planned_cohort(plan)?;
         let k = plan.keys();
         let Some((_, train_key)) = k.unified().first().copied() else {
             return Ok(());

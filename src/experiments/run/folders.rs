@@ -168,18 +168,23 @@ fn remove_dead_runs(experiment_dir: &Path, own: &Path) {
     }
 }
 
-/// Renames a finished run's folder to `run-NNNN` and returns the new path.
-pub(super) fn finish_run_dir(partial: &Path) -> Result<PathBuf> {
+/// The folder a `run-NNNN.partial` folder becomes when its run finishes.
+pub(super) fn finished_path(partial: &Path) -> Result<PathBuf> {
     let name = partial
         .file_name()
         .and_then(|n| n.to_str())
         .and_then(|n| n.strip_suffix(PARTIAL))
         .context("a partial run folder's name ends in .partial")?;
-    let done = partial.with_file_name(name);
+    Ok(partial.with_file_name(name))
+}
+
+/// Renames a finished run's folder to `run-NNNN` and returns the new path.
+pub(super) fn finish_run_dir(partial: &Path) -> Result<PathBuf> {
+    let done = finished_path(partial)?;
     let owner = partial.join(OWNER);
     std::fs::remove_file(&owner).with_context(|| format!("{}: cannot remove", owner.display()))?;
     std::fs::rename(partial, &done)
-        .with_context(|| format!("{}: cannot rename to {name}", partial.display()))?;
+        .with_context(|| format!("{}: cannot rename to {}", partial.display(), done.display()))?;
     Ok(done)
 }
 

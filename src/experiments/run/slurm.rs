@@ -30,7 +30,7 @@ use crate::experiments::EXPERIMENTS;
 use crate::io::atomic::write_atomic;
 use crate::spec::{self, Cell, LauncherParams, Spec};
 
-use super::folders::{new_run_dir, OWNER};
+use super::folders::{finished_path, new_run_dir, OWNER, PARTIAL};
 use super::{RunOptions, UnitState};
 
 /// The record of a submission, `logs/launch.json`.
@@ -324,6 +324,8 @@ pub fn launch(spec_path: &Path, opts: &RunOptions) -> Result<Launched> {
     }
     args.push(format!("--wrap=exec {}", command.join(" ")));
     let final_job = sbatch(&args)?;
+    launch.jobs.last = Some(final_job.clone());
+    write_launch(&run_dir, &launch)?;
     // The run folder belongs to the final job now: no local run takes it for a dead one.
     let owner = run_dir.join(OWNER);
     std::fs::write(&owner, format!("slurm {final_job}\n"))
@@ -377,10 +379,6 @@ fn log_path(run_dir: &Path, t: &Task) -> PathBuf {
 /// (with its job and log) and the final job's log.
 pub fn wait(launched: &Launched) -> Result<()> {
     let launch = read_launch(&logs(&launched.run_dir).join("launch.json"))?;
-    let experiment_dir = launched
-        .run_dir
-        .parent()
-        .context("a run folder has its experiment's folder")?;
     let started = Instant::now();
     eprintln!(
         "waiting for Slurm: {} task(s), final job {}",
@@ -396,13 +394,10 @@ pub fn wait(launched: &Launched) -> Result<()> {
         std::thread::sleep(Duration::from_secs(2));
     }
     // The final job renames the run folder when it finished.
-    let partial = launched
-        .run_dir
-        .file_name()
-        .unwrap_or_default()
-        .to_string_lossy();
-    let finished = experiment_dir.join(partial.trim_end_matches(super::folders::PARTIAL));
-    if finished.join("manifest.json").exists() {
+    if finished_path(&launched.run_dir)?
+        .join("manifest.json")
+        .exists()
+    {
         eprintln!(
             "Slurm jobs finished in {}",
             crate::experiments::stage::duration(started.elapsed().as_secs_f64())
@@ -527,10 +522,13 @@ pub(super) fn check_assembled(
 ) -> Result<()> {
     let launch = read_launch(&logs(run_dir).join("launch.json"))?;
     let mut missing = Vec::new();
+    let mut named = std::collections::BTreeSet::new();
     for c in cells {
         for &seed in &c.spec.seeds {
+            // A unit several of a cell's tasks plan (its dataset) is named once, with the
+            // first task that plans it.
             for (id, cached) in task_units(c, seed, a, cache)? {
-                if cached {
+                if cached || !named.insert((c.name.clone(), id.clone())) {
                     continue;
                 }
                 let by = launch
@@ -608,12 +606,12 @@ pub(super) fn unit_states(results: &Path, experiment: &str) -> Vec<(String, Unit
     let q = queue().unwrap_or_default();
     let mut out = Vec::new();
     for run_dir in entries.filter_map(|e| e.ok().map(|e| e.path())) {
+        if !run_dir.to_string_lossy().ends_with(PARTIAL) {
+            continue;
+        }
         let Ok(launch) = read_launch(&logs(&run_dir).join("launch.json")) else {
             continue;
         };
-        if !run_dir.to_string_lossy().ends_with(super::folders::PARTIAL) {
-            continue;
-        }
         for t in &launch.tasks {
             let job = task_job(&launch, t).unwrap_or_default();
             let state = match q.iter().find(|(id, _)| *id == job).map(|(_, s)| s.as_str()) {

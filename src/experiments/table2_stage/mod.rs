@@ -81,8 +81,8 @@ impl Experiment for Table2 {
     }
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {
-        let (spec, a) = (plan.spec, plan.assets);
-        let cohort = cohort_unit(spec, &a.face, &a.data(spec)?);
+        let spec = plan.spec;
+        let cohort = planned_cohort(plan)?;
         let k = plan.keys();
         let transfers: Vec<(u64, Unit)> = k
             .unified()
@@ -167,6 +167,12 @@ impl Experiment for Table2 {
         let labels = crate::experiments::table1::sweep_labels(&names).1;
         sweep_figure(&sweep.figures(), &cells, &labels)
     }
+}
+
+/// The cohorts' unit in a cell's plan (the inversion and the pose transfer key on it too).
+pub(crate) fn planned_cohort(plan: &Plan) -> Result<Unit> {
+    let (spec, a) = (plan.spec, plan.assets);
+    Ok(cohort_unit(spec, &a.face, &a.data(spec)?))
 }
 
 /// The reference frames of the cohorts, as `reference.csv`.
