@@ -184,3 +184,50 @@ fn edit_command_meets_keys_and_names_bad_ones() {
         assert!(!dir.join("bad.csv").exists());
     }
 }
+
+/// Where the basis' prediction of a strong expression inverts prisms, `solve_predicted`
+/// starts from the prediction of a fraction of it and continues along the ray from neutral:
+/// it reaches the equilibrium the solve from rest reaches, within the landmark slack of the
+/// solver's tolerance (`bench solve`: up to 0.07 mm).
+#[test]
+fn a_predicted_solve_reaches_the_equilibrium_of_the_solve_from_rest() {
+    use facelab::sim::solver::solve_predicted;
+    let model = crate::model();
+    let weights = facelab::experiments::face::FaceSource::default()
+        .weights()
+        .unwrap();
+    let mut ws = Workspace::new(model).unwrap();
+    let params = SolveParams::default();
+    let n = model.vertex_count();
+    let mut continued = 0;
+    for (e, jaw) in facelab::sim::expression::Expression::ALL
+        .into_iter()
+        .flat_map(|e| [0.4, 1.0].map(|j| (e, j)))
+    {
+        let a = weights.sample(e, 1.0, jaw);
+        let (predicted, report) = solve_predicted(model, basis(), &a, &mut ws, &params).unwrap();
+        continued += usize::from(report.pieces > 1);
+        let (rest, _) = solve_from_rest(model, &a, &mut ws, &params).unwrap();
+        let apart = predicted.positions[..n]
+            .iter()
+            .zip(&rest.positions[..n])
+            .map(|(p, q)| {
+                ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+            })
+            .fold(0.0, f64::max);
+        println!(
+            "{e} at jaw {jaw}: {} pieces, {:.4} mm from the solve from rest",
+            report.pieces,
+            apart * 1e3
+        );
+        assert!(
+            apart < 1e-4,
+            "{e} at jaw {jaw}: {:.4} mm apart",
+            apart * 1e3
+        );
+    }
+    assert!(
+        continued > 0,
+        "every prediction converged: nothing continued"
+    );
+}

@@ -181,10 +181,12 @@ pub fn solve_from_rest(
     Ok((state, total))
 }
 
-/// Solves for `target` from the linear basis' prediction of its equilibrium: one Newton solve
-/// at the target, with no continuation, which is what makes sampling many random faces cheap.
-/// If the prediction inverts an element or Newton does not converge from it, falls back to
-/// `solve_from_rest`; the report's iterations include the failed attempt.
+/// Solves for `target` from the linear basis' prediction of its equilibrium, which is what
+/// makes sampling many random faces cheap. Where the prediction of `target` inverts a prism or
+/// Newton does not converge from it, the prediction of `target` scaled toward neutral (by
+/// 1/2, then 1/4) is tried instead, and its equilibrium continued to `target` along the same
+/// straight path from neutral that [`solve_from_rest`] follows; if none of them converges,
+/// falls back to `solve_from_rest`. The report's iterations include the failed attempts.
 pub fn solve_predicted(
     model: &FaceModel,
     basis: &LinearBasis,
@@ -192,33 +194,67 @@ pub fn solve_predicted(
     ws: &mut Workspace,
     params: &SolveParams,
 ) -> Result<(State, SolveReport), SolveError> {
-    let pose = model.pose(target);
-    let mut positions = basis.predict(target);
-    for (node, p) in positions.iter_mut().enumerate() {
-        if !model.free[node] {
-            *p = pose.fixed[node];
+    let mut spent = 0;
+    for level in 0..PREDICTION_LEVELS {
+        let t = 0.5f64.powi(level as i32);
+        let a = if level == 0 {
+            target.clone()
+        } else {
+            target.scaled_from_neutral(t)
+        };
+        let pose = model.pose(&a);
+        let mut positions = basis.predict(&a);
+        for (node, p) in positions.iter_mut().enumerate() {
+            if !model.free[node] {
+                *p = pose.fixed[node];
+            }
         }
+        let mut state = State {
+            positions,
+            activations: a,
+        };
+        let mut report = match newton(
+            model,
+            &pose,
+            &mut state,
+            ws,
+            params,
+            Curvature::SemiDefinite,
+        ) {
+            Ok(report) => report,
+            Err(SolveError::NotConverged { iterations, .. }) => {
+                spent += iterations;
+                continue;
+            }
+            Err(_) => continue,
+        };
+        if level > 0 {
+            match solve(model, target, &mut state, ws, params) {
+                Ok(rest_of_path) => {
+                    report.iterations += rest_of_path.iterations;
+                    report.pieces += rest_of_path.pieces;
+                    report.residual = rest_of_path.residual;
+                }
+                Err(SolveError::NotConverged { iterations, .. }) => {
+                    spent += report.iterations + iterations;
+                    break;
+                }
+                Err(_) => {
+                    spent += report.iterations;
+                    break;
+                }
+            }
+        }
+        report.iterations += spent;
+        return Ok((state, report));
     }
-    let mut state = State {
-        positions,
-        activations: target.clone(),
-    };
-    let spent = match newton(
-        model,
-        &pose,
-        &mut state,
-        ws,
-        params,
-        Curvature::SemiDefinite,
-    ) {
-        Ok(report) => return Ok((state, report)),
-        Err(SolveError::NotConverged { iterations, .. }) => iterations,
-        Err(_) => 0,
-    };
     let (state, mut report) = solve_from_rest(model, target, ws, params)?;
     report.iterations += spent;
     Ok((state, report))
 }
+
+/// How many predictions `solve_predicted` tries: the target's, then at 1/2 and 1/4 of it.
+const PREDICTION_LEVELS: usize = 3;
 
 #[cfg(test)]
 mod tests;
