@@ -16,6 +16,9 @@
 //! the kinks of `D` exactly. It stops when the norm of the proximal gradient, zero exactly
 //! at the minimum, falls below a tolerance; Choe et al. used steepest descent, which on the
 //! kinked objective never met that test in 20,000 iterations (facelab before 2026-12).
+//! The neck's equilibrium fit solves its small box QPs (72 activations, one per
+//! Levenberg-Marquardt step) by [`projected_newton`], which meets the same test in a handful
+//! of iterations.
 //!
 //! AU space (`au_fit`): `min |AU(a) - r|^2` over the box, by projected Gauss-Newton with a
 //! forward-difference Jacobian through any face function (the linear basis, or the nonlinear
@@ -280,6 +283,93 @@ pub fn projected_gradient(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: u
     accelerated(qp, Bound::Box, start, tol, max_iterations)
 }
 
+/// The box QP by projected Newton (Bertsekas 1982): each iteration fixes the variables at a
+/// bound whose gradient pushes outward (within `min(EPSILON, stationarity)` of the bound),
+/// takes the Newton step of the others (Cholesky of H on them) and a scaled gradient step of
+/// the fixed ones, and searches along the projection arc (Armijo). For the small, strictly
+/// convex QPs of the neck's fit it meets the same stationarity test as [`projected_gradient`]
+/// in a handful of iterations where FISTA takes thousands. An H that is not positive
+/// definite on the free set falls back to the scaled gradient step.
+pub fn projected_newton(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usize) -> Solution {
+    use faer::linalg::solvers::Solve;
+    const EPSILON: f64 = 1e-3;
+    const ARMIJO: f64 = 1e-4;
+    let n = qp.n;
+    let scale = qp.gradient_scale();
+    let objective = |a: &[f64]| -> f64 {
+        let ha = qp.hv(a);
+        a.iter()
+            .zip(&ha)
+            .zip(&qp.g)
+            .map(|((x, h), g)| x * (0.5 * h - g))
+            .sum()
+    };
+    let mut a: Vec<f64> = start.iter().map(|x| x.clamp(0.0, 1.0)).collect();
+    let mut f = objective(&a);
+    let mut iterations = 0;
+    let mut gradient_norm = stationarity(qp, Bound::Box, &a);
+    while iterations < max_iterations && gradient_norm > tol * scale {
+        iterations += 1;
+        let g = qp.gradient(&a);
+        let eps = EPSILON.min(gradient_norm);
+        let binding: Vec<bool> = (0..n)
+            .map(|i| (a[i] <= eps && g[i] > 0.0) || (a[i] >= 1.0 - eps && g[i] < 0.0))
+            .collect();
+        let free: Vec<usize> = (0..n).filter(|&i| !binding[i]).collect();
+        let diagonal = |i: usize| qp.h[i * n + i].max(1e-300);
+        let mut step: Vec<f64> = (0..n).map(|i| -g[i] / diagonal(i)).collect();
+        if !free.is_empty() {
+            let m = free.len();
+            let h = faer::Mat::<f64>::from_fn(m, m, |r, c| qp.h[free[r] * n + free[c]]);
+            if let Ok(llt) = h.llt(faer::Side::Lower) {
+                let mut rhs = faer::Mat::<f64>::from_fn(m, 1, |r, _| -g[free[r]]);
+                llt.solve_in_place(rhs.as_mut());
+                for (r, &i) in free.iter().enumerate() {
+                    step[i] = rhs[(r, 0)];
+                }
+            }
+        }
+        // Armijo along the arc a(t) = P(a + t step).
+        let mut t = 1.0;
+        let mut accepted = false;
+        for _ in 0..60 {
+            let trial: Vec<f64> = a
+                .iter()
+                .zip(&step)
+                .map(|(x, d)| (x + t * d).clamp(0.0, 1.0))
+                .collect();
+            let decrease: f64 = (0..n)
+                .map(|i| {
+                    if binding[i] {
+                        g[i] * (a[i] - trial[i])
+                    } else {
+                        -t * g[i] * step[i]
+                    }
+                })
+                .sum();
+            let ft = objective(&trial);
+            if f - ft >= ARMIJO * decrease {
+                accepted = f - ft >= 0.0;
+                a = trial;
+                f = ft;
+                break;
+            }
+            t *= 0.5;
+        }
+        gradient_norm = stationarity(qp, Bound::Box, &a);
+        if !accepted {
+            break;
+        }
+    }
+    Solution {
+        residual: qp.residual(&a),
+        converged: gradient_norm <= tol * scale,
+        gradient_norm,
+        a,
+        iterations,
+    }
+}
+
 /// Projected Gauss-Newton for `min |f(a) - r|^2` over the box, with `f` evaluated by the
 /// caller (any face: linear basis or nonlinear solve) and its Jacobian by forward differences
 /// of size `h` (one-sided toward the box interior). Stops when the step is below `tol`
@@ -451,6 +541,43 @@ mod tests {
             assert!((a - t).abs() < 1e-6, "{:?}", s.a);
         }
         assert!(s.a.iter().all(|x| (0.0..=1.0).contains(x)));
+    }
+
+    /// Random strictly convex 72-variable QPs (the neck fit's size) whose minima sit partly on
+    /// the bounds: projected Newton meets FISTA's stationarity test at the same minimum, in far
+    /// fewer iterations.
+    #[test]
+    fn projected_newton_finds_the_minimum_projected_gradient_finds() {
+        let mut rng = crate::rng::stream(5, "test/invert/newton");
+        for trial in 0..8 {
+            let (n, m) = (72, 40);
+            let columns: Vec<Vec<f64>> = (0..n)
+                .map(|_| (0..m).map(|_| rng.normal()).collect())
+                .collect();
+            let d: Vec<f64> = (0..m).map(|_| 3.0 * rng.normal()).collect();
+            let mut qp = BoxQp::least_squares(&columns, &d);
+            for i in 0..n {
+                qp.h[i * n + i] += 0.05;
+            }
+            let fista = projected_gradient(&qp, &[0.0; 72], 1e-10, 200_000);
+            let newton = projected_newton(&qp, &[0.0; 72], 1e-10, 100);
+            assert!(fista.converged && newton.converged, "trial {trial}");
+            let bound = newton.a.iter().filter(|&&x| x == 0.0 || x == 1.0).count();
+            assert!(bound > 0 && bound < n, "trial {trial}: {bound} at a bound");
+            let apart = fista
+                .a
+                .iter()
+                .zip(&newton.a)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
+            assert!(apart < 1e-6, "trial {trial}: {apart:.2e} apart");
+            assert!(
+                10 * newton.iterations < fista.iterations,
+                "trial {trial}: Newton {} iterations, FISTA {}",
+                newton.iterations,
+                fista.iterations
+            );
+        }
     }
 
     #[test]

@@ -86,14 +86,33 @@ pub fn bench_neck(seconds: f64, out: &mut impl Write) -> Result<()> {
         [-30.0, 40.0, 20.0],
     ];
     let t = Instant::now();
+    let mut done = Vec::with_capacity(fits.len());
     for d in fits {
-        neck.fit(HeadPose::from_degrees(d[0], d[1], d[2]))?;
+        done.push(neck.fit(HeadPose::from_degrees(d[0], d[1], d[2]))?);
     }
     line(
         out,
         "neck.teacher_fit.ms",
         t.elapsed().as_secs_f64() * 1e3 / fits.len() as f64,
         "ms",
+    )?;
+    line(
+        out,
+        "neck.teacher_fit.steps_mean",
+        done.iter().map(|f| f.iterations as f64).sum::<f64>() / fits.len() as f64,
+        "count",
+    )?;
+    line(
+        out,
+        "neck.teacher_fit.converged",
+        done.iter().filter(|f| f.converged).count() as f64,
+        "count",
+    )?;
+    line(
+        out,
+        "neck.teacher_fit.error_max_deg",
+        done.iter().map(|f| f.error_degrees).fold(0.0, f64::max),
+        "deg",
     )?;
     Ok(())
 }

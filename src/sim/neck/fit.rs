@@ -1,13 +1,15 @@
 //! The equilibrium fit (the activations and strains that hold a head pose at rest, a box
-//! QP solved by projected gradient) and the teacher voluntary controller built on it.
+//! QP solved by projected Newton) and the teacher voluntary controller built on it.
 
 use super::*;
-use crate::invert::{projected_gradient, BoxQp};
+use crate::invert::{projected_newton, BoxQp};
 
 /// The fit's residual weights: per N m of unbalanced joint torque and per radian of skull
 /// orientation error (the posture prior has `posture_weight`, the effort `effort_weight`).
 const FIT_TORQUE_SCALE: f64 = 10.0;
 const FIT_ANGLE_SCALE: f64 = 10.0;
+/// Levenberg-Marquardt steps allowed per fit.
+const MAX_STEPS: usize = 80;
 
 /// The activations that hold a head pose, and the strains there (the voluntary setpoints).
 #[derive(Clone, Debug, PartialEq)]
@@ -19,7 +21,11 @@ pub struct Fit {
     pub error_degrees: f64,
     /// Unbalanced joint torque left (N m): the reflex absorbs it with a small deflection.
     pub torque_residual: f64,
+    /// Levenberg-Marquardt steps taken.
     pub iterations: usize,
+    /// Whether the fit stopped at its gain test (a step that lowers the objective by less
+    /// than 1e-7 of it) rather than at its 80-step cap or an unaccepted step at full damping.
+    pub converged: bool,
 }
 
 impl Neck {
@@ -57,7 +63,8 @@ impl Neck {
         let mut iterations = 0;
         // Levenberg-Marquardt damping, raised when a step fails.
         let mut mu = 0.0f64;
-        while iterations < 80 {
+        let mut converged = false;
+        while iterations < MAX_STEPS && !converged {
             iterations += 1;
             let (k, jh) = self.stiffness(&q, &a, &g, &goal, e);
             // Linearized residual M_a a' + M_q dq - d.
@@ -138,7 +145,7 @@ impl Neck {
                 qp.h[i * qp.n + i] += lambda + mu;
                 qp.g[i] += mu * a[i];
             }
-            let proposal = projected_gradient(&qp, &a, 1e-10, 5000).a;
+            let proposal = projected_newton(&qp, &a, 1e-10, 200).a;
             let rest: Vec<f64> = (0..ROWS)
                 .map(|row| {
                     d[row]
@@ -162,9 +169,7 @@ impl Neck {
                     let gain = phi - phit;
                     (q, a, r, g, e, ms, phi) = (qt, at, rt, gt, et, mst, phit);
                     accepted = true;
-                    if gain < 1e-7 * phi {
-                        iterations = usize::MAX - 1;
-                    }
+                    converged = gain < 1e-7 * phi;
                     break;
                 }
                 t *= 0.5;
@@ -177,9 +182,6 @@ impl Neck {
             } else if mu > 0.0 {
                 mu = if mu < 1e-6 { 0.0 } else { mu / 10.0 };
             }
-            if iterations == usize::MAX - 1 {
-                break;
-            }
         }
         let error = r[DOF..DOF + 3].iter().map(|v| v * v).sum::<f64>().sqrt() / FIT_ANGLE_SCALE;
         let torque = g.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -189,7 +191,8 @@ impl Neck {
             strain: self.strains(&ms),
             error_degrees: error.to_degrees(),
             torque_residual: torque,
-            iterations: iterations.min(80),
+            iterations,
+            converged,
         })
     }
 }
