@@ -10,7 +10,8 @@ pub use params::{ModelParams, Normalization, TrainParams};
 
 /// Runs `f` with candle's CPU kernels on one thread each (candle reads `RAYON_NUM_THREADS`
 /// at every matrix product), for work that runs several networks side by side on rayon's
-/// workers: a small MLP trains fastest on one thread, and the bytes do not depend on it.
+/// workers, and for a network trained alone: a small MLP trains fastest on one thread (on two
+/// it takes twice as long, `bench train`), and the bytes do not depend on it.
 /// The variable is restored afterwards, also if `f` panics; rayon's global pool is started
 /// first, so it keeps its own size.
 pub fn one_thread_each<R>(f: impl FnOnce() -> R) -> R {
