@@ -194,8 +194,8 @@ pub fn bench_solve(
         for a in &batch {
             let (state, r) = solve_predicted(&model, &basis, a, &mut ws, &params)?;
             predicted_iterations.push(r.iterations as f64);
-            // More than one piece: Newton from the prediction failed and the solve went
-            // the continuation path from rest.
+            // More than one piece: Newton from the prediction failed and the solve followed
+            // the continuation path, from a fraction of the prediction or from rest.
             fallbacks += usize::from(r.pieces > 1);
             predicted_states.push(state);
         }
