@@ -348,8 +348,10 @@ pub fn projected_newton(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usi
                 })
                 .sum();
             let ft = objective(&trial);
+            // `decrease` >= 0: the free step is a Newton step of a positive definite block
+            // (or a scaled gradient step), and the bound ones move against the gradient.
             if f - ft >= ARMIJO * decrease {
-                accepted = f - ft >= 0.0;
+                accepted = true;
                 a = trial;
                 f = ft;
                 break;

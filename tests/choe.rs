@@ -191,6 +191,7 @@ fn edit_command_meets_keys_and_names_bad_ones() {
 /// solver's tolerance (`bench solve`: up to 0.07 mm).
 #[test]
 fn a_predicted_solve_reaches_the_equilibrium_of_the_solve_from_rest() {
+    use facelab::sim::geom::{norm, sub};
     use facelab::sim::solver::solve_predicted;
     let model = crate::model();
     let weights = facelab::experiments::face::FaceSource::default()
@@ -211,9 +212,7 @@ fn a_predicted_solve_reaches_the_equilibrium_of_the_solve_from_rest() {
         let apart = predicted.positions[..n]
             .iter()
             .zip(&rest.positions[..n])
-            .map(|(p, q)| {
-                ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
-            })
+            .map(|(&p, &q)| norm(sub(p, q)))
             .fold(0.0, f64::max);
         println!(
             "{e} at jaw {jaw}: {} pieces, {:.4} mm from the solve from rest",

@@ -132,9 +132,7 @@ use crate::sim::controls::{
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::muscles::{Side, MUSCLE_PAIRS};
 use crate::sim::solver::solve_predicted;
-use crate::sim::{
-    solve_from_rest, Activations, FaceModel, SolveError, SolveParams, SolveReport, State, Workspace,
-};
+use crate::sim::{solve_from_rest, Activations, FaceModel, SolveParams, Workspace};
 use reader::FaceReader;
 
 /// One training pair.
@@ -211,69 +209,6 @@ pub fn generate(
             },
         )
         .collect()
-}
-
-/// A path through `draws`: from the draw nearest neutral, always on to the nearest (in
-/// activation space) not yet visited. Depends only on the draws.
-pub fn path(draws: &[Activations]) -> Vec<usize> {
-    let distance = |a: &Activations, b: &Activations| -> f64 {
-        a.values()
-            .iter()
-            .zip(b.values())
-            .map(|(x, y)| (x - y) * (x - y))
-            .sum()
-    };
-    let mut left: Vec<usize> = (0..draws.len()).collect();
-    let mut order = Vec::with_capacity(draws.len());
-    let mut here = Activations::neutral();
-    while !left.is_empty() {
-        let (k, _) = left
-            .iter()
-            .enumerate()
-            .map(|(k, &i)| (k, distance(&here, &draws[i])))
-            .fold(
-                (0, f64::INFINITY),
-                |best, c| if c.1 < best.1 { c } else { best },
-            );
-        let i = left.swap_remove(k);
-        here = draws[i].clone();
-        order.push(i);
-    }
-    order
-}
-
-/// Solves `draws` in the order `path`, each from the equilibrium before it by continuation
-/// (`sim::solve`), the first and any whose continuation fails by `cold`; `each(i, state)`
-/// receives draw `i`'s equilibrium, or the cold start's error.
-pub fn solve_path(
-    model: &FaceModel,
-    draws: &[Activations],
-    path: &[usize],
-    mut cold: impl FnMut(&Activations, &mut Workspace) -> Result<(State, SolveReport), SolveError>,
-    ws: &mut Workspace,
-    params: &SolveParams,
-    mut each: impl FnMut(usize, Result<&State, SolveError>) -> Result<()>,
-) -> Result<()> {
-    let mut state: Option<State> = None;
-    for &i in path {
-        let a = &draws[i];
-        let warm = match state.as_mut() {
-            Some(s) => crate::sim::solve(model, a, s, ws, params).is_ok(),
-            None => false,
-        };
-        if !warm {
-            match cold(a, ws) {
-                Ok((s, _)) => state = Some(s),
-                Err(e) => {
-                    state = None;
-                    each(i, Err(e))?;
-                    continue;
-                }
-            }
-        }
-        each(i, Ok(state.as_ref().expect("solved above")))?;
-    }
-    Ok(())
 }
 
 /// Workspaces kept across calls of [`generate`]: a data set made in chunks analyses the

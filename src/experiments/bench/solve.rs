@@ -4,7 +4,7 @@ use crate::experiments::face::FaceSource;
 use crate::experiments::observe::median;
 use crate::sim::basis::LinearBasis;
 use crate::sim::solver::{iteration_cost, softest_mode, solve_predicted, SoftMode};
-use crate::sim::{solve, solve_from_rest, SolveParams, Workspace};
+use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 use anyhow::Result;
 use std::io::Write;
 use std::time::Instant;
@@ -225,13 +225,15 @@ pub fn bench_solve(
             "count",
         )?;
         // Chains, as the dataset could solve a chunk: per expression, draws of s and jaw
-        // (4 x the batch over the six), ordered by `dataset::path`, each from the one before
-        // by continuation; against the same draws each from the basis prediction.
+        // (4 x the batch over the six), ordered by `chain_order`, solved as one clip
+        // (`table2::solve_clip`: the first from the prediction, each next by continuation from
+        // the one before); against the same draws each from the basis prediction.
         if level == 0 {
             let mut rng = stream(seed, "bench/solve/chains");
             let per = (4 * count / 6).max(2);
             let (mut independent, mut chained) = (0.0, 0.0);
-            let (mut colds, mut drawn) = (0usize, 0usize);
+            let colds = std::cell::Cell::new(0usize);
+            let mut drawn = 0usize;
             let (mut chain_apart, mut chain_off) = (0.0f64, 0usize);
             for e in crate::sim::expression::Expression::ALL {
                 let draws: Vec<_> = (0..per)
@@ -247,22 +249,21 @@ pub fn bench_solve(
                     alone.push(solve_predicted(&model, &basis, a, &mut ws, &params)?.0);
                 }
                 independent += t.elapsed().as_secs_f64();
-                let order = crate::dataset::path(&draws);
+                let order = chain_order(&draws);
+                let chain: Vec<Activations> = order.iter().map(|&i| draws[i].clone()).collect();
                 let mut solved: Vec<Option<crate::sim::State>> = vec![None; per];
                 let t = Instant::now();
-                let cold = |a: &crate::sim::Activations, ws: &mut Workspace| {
-                    colds += 1;
-                    solve_predicted(&model, &basis, a, ws, &params)
-                };
-                crate::dataset::solve_path(
+                crate::experiments::table2::solve_clip(
                     &model,
-                    &draws,
-                    &order,
-                    cold,
+                    &chain,
+                    |a, ws| {
+                        colds.set(colds.get() + 1);
+                        Ok(solve_predicted(&model, &basis, a, ws, &params)?.0)
+                    },
                     &mut ws,
                     &params,
-                    |i, s| {
-                        solved[i] = Some(s?.clone());
+                    |f, s| {
+                        solved[order[f]] = Some(s.clone());
                         Ok(())
                     },
                 )?;
@@ -288,7 +289,12 @@ pub fn bench_solve(
                 chained * 1e3 / drawn as f64,
                 "ms",
             )?;
-            line(out, &format!("{c}.cold_starts"), colds as f64, "count")?;
+            line(
+                out,
+                &format!("{c}.cold_starts"),
+                colds.get() as f64,
+                "count",
+            )?;
             line(
                 out,
                 &format!("{c}.chained_vs_predicted_landmark_max_mm"),
@@ -382,4 +388,33 @@ pub fn bench_solve(
         out.flush()?;
     }
     Ok(())
+}
+
+/// An order of `draws` for solving them as a chain: from the draw nearest neutral, always on to
+/// the nearest (in activation space) not yet visited. Depends only on the draws.
+fn chain_order(draws: &[Activations]) -> Vec<usize> {
+    let distance = |a: &Activations, b: &Activations| -> f64 {
+        a.values()
+            .iter()
+            .zip(b.values())
+            .map(|(x, y)| (x - y) * (x - y))
+            .sum()
+    };
+    let mut left: Vec<usize> = (0..draws.len()).collect();
+    let mut order = Vec::with_capacity(draws.len());
+    let mut here = Activations::neutral();
+    while !left.is_empty() {
+        let (k, _) = left
+            .iter()
+            .enumerate()
+            .map(|(k, &i)| (k, distance(&here, &draws[i])))
+            .fold(
+                (0, f64::INFINITY),
+                |best, c| if c.1 < best.1 { c } else { best },
+            );
+        let i = left.swap_remove(k);
+        here = draws[i].clone();
+        order.push(i);
+    }
+    order
 }
