@@ -1,11 +1,12 @@
 //! The built-in landmarker against the real MediaPipe (0.10.14) on the committed test photos
 //! (`tests/data/landmarker/photos/`, SOURCES.md there; references made by
-//! `tools/landmarker/reference.py`).
+//! `tools/landmarker/reference.py` for Face Mesh v1 and `reference_landmarker.py` for the Face
+//! Landmarker task: Face Mesh v2 and its blendshapes).
 
 use std::path::PathBuf;
 
 use facelab::io::photo::read_rgb;
-use facelab::landmark::Landmarker;
+use facelab::landmark::{BlendshapeNetwork, Landmarker, MeshVersion, BLENDSHAPE_NAMES};
 
 use crate::root;
 
@@ -67,9 +68,91 @@ fn compare(stem: &str, landmarker: &Landmarker) -> Option<(f64, f64, f64)> {
     Some((mean, max, box_err))
 }
 
+/// The committed test pictures, by file name.
+fn photos() -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(data().join("photos"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".png") || n.ends_with(".jpg"))
+        .collect();
+    names.sort();
+    names
+}
+
+/// Face Mesh v2 and the blendshape head, as the Face Landmarker task runs them, against the
+/// real one on every committed picture: landmarks within 1% (mean) and 3% (max) of the
+/// inter-ocular distance, every one of the 52 scores within 0.03, no face where it finds none.
+#[test]
+fn face_landmarker_v2_and_blendshapes_match_mediapipe_on_every_test_photo() {
+    let landmarker = Landmarker::with(MeshVersion::V2).unwrap();
+    let head = BlendshapeNetwork::new().unwrap();
+    let (mut faces, mut none) = (0, 0);
+    let mut report = Vec::new();
+    for name in photos() {
+        let stem = name.rsplit_once('.').unwrap().0;
+        let frame = read_rgb(&data().join("photos").join(&name)).unwrap();
+        let found = landmarker.faces(&frame).unwrap();
+        let want = rows(data().join(format!("reference/{stem}.landmarks_v2.csv")));
+        let text =
+            std::fs::read_to_string(data().join(format!("reference/{stem}.blendshapes.csv")))
+                .unwrap();
+        let scores: Vec<(String, f64)> = text
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let (n, v) = l.split_once(',').unwrap();
+                (n.to_string(), v.parse().unwrap())
+            })
+            .collect();
+        if want.is_empty() {
+            assert!(
+                found.is_empty(),
+                "{stem}: MediaPipe finds no face, facelab does"
+            );
+            assert!(scores.is_empty());
+            none += 1;
+            continue;
+        }
+        assert!(
+            !found.is_empty(),
+            "{stem}: MediaPipe finds a face, facelab none"
+        );
+        let points = &found[0].mesh.points;
+        assert_eq!(points.len(), 478);
+        let d = |a: [f64; 2], b: [f64; 2]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+        let iod = d([want[33][1], want[33][2]], [want[263][1], want[263][2]]);
+        let dist: Vec<f64> = (0..478)
+            .map(|i| d([points[i][0], points[i][1]], [want[i][1], want[i][2]]) / iod)
+            .collect();
+        let mean = dist.iter().sum::<f64>() / dist.len() as f64;
+        let max = dist.iter().cloned().fold(0.0, f64::max);
+        let got = head.scores(points).unwrap();
+        assert_eq!(scores.len(), 52);
+        let (mut worst, mut worst_name) = (0.0f64, "");
+        for (k, (n, v)) in scores.iter().enumerate() {
+            assert_eq!(n, BLENDSHAPE_NAMES[k]);
+            if (got[k] - v).abs() > worst {
+                worst = (got[k] - v).abs();
+                worst_name = BLENDSHAPE_NAMES[k];
+            }
+        }
+        report.push(format!(
+            "{stem}: landmarks mean {mean:.4} max {max:.4} of the inter-ocular distance; \
+             blendshapes max |diff| {worst:.4} ({worst_name})"
+        ));
+        assert!(mean <= 0.01, "{stem}: mean landmark distance {mean:.4}");
+        assert!(max <= 0.03, "{stem}: max landmark distance {max:.4}");
+        assert!(worst <= 0.03, "{stem}: {worst_name} differs by {worst:.4}");
+        faces += 1;
+    }
+    eprintln!("{}", report.join("\n"));
+    assert!(faces >= 12 && none >= 1, "{faces} faces, {none} without");
+}
+
+/// Face Mesh v1 (MediaPipe's legacy FaceMesh solution) on the pictures its references cover.
 #[test]
 fn landmarks_match_mediapipe_on_every_test_photo() {
-    let landmarker = Landmarker::new().unwrap();
+    let landmarker = Landmarker::with(MeshVersion::V1).unwrap();
     let mut faces = 0;
     for stem in [
         "astronaut",

@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 
 use crate::landmark::metric;
 use crate::landmark::warp::RgbFrame;
-use crate::landmark::Landmarker;
+use crate::landmark::{Landmarker, MeshVersion};
 use crate::observe::landmarks::{landmarks, LANDMARK_COUNT};
 use crate::observe::{Calibration, Observer};
 use crate::report::render::{render, RenderOptions};
@@ -66,7 +66,12 @@ impl FaceReader {
     pub fn new(source: Source) -> Result<FaceReader> {
         let landmarker = match source {
             Source::Mesh => None,
-            Source::Render => Some(Landmarker::new().context("loading the landmarker")?),
+            // Face Mesh v1: the landmarker every committed render-sourced run read its
+            // renders with; the dataset's cache keys do not name a landmarker, so moving
+            // this to v2 is a change of data that needs its own version bump and reruns.
+            Source::Render => {
+                Some(Landmarker::with(MeshVersion::V1).context("loading the landmarker")?)
+            }
         };
         Ok(FaceReader { source, landmarker })
     }

@@ -5,7 +5,7 @@
 
 use super::graph::{self, Graph, GraphError};
 use super::warp::{self, Border, RgbFrame, RotatedRect};
-use super::{chw_tensor, sigmoid};
+use super::{chw_tensor, sigmoid, MeshVersion};
 
 /// Strides of the four anchor layers; layers with equal strides share one grid.
 const STRIDES: [usize; 4] = [8, 16, 16, 16];
@@ -30,10 +30,15 @@ impl Detection {
         self.bbox[2] * self.bbox[3]
     }
 
-    /// MediaPipe's landmark crop for this face.
-    pub fn face_rect(&self) -> RotatedRect {
+    /// MediaPipe's landmark crop for this face: Face Mesh v1's square crop
+    /// (`face_landmark_front_cpu`), or the Face Landmarker task's 1.5x box for v2.
+    pub fn face_rect(&self, version: MeshVersion) -> RotatedRect {
         let [x, y, w, h] = self.bbox;
-        RotatedRect::face(
+        let rect = match version {
+            MeshVersion::V1 => RotatedRect::face,
+            MeshVersion::V2 => RotatedRect::face_box,
+        };
+        rect(
             [x + w / 2.0, y + h / 2.0],
             w,
             h,

@@ -1,11 +1,14 @@
 //! A small interpreter for the two MediaPipe networks, in candle on the CPU.
 //!
 //! `tools/landmarker/convert_mediapipe.py` turns each TFLite file into a safetensors file:
-//! the constant tensors (fp16, laid out for NCHW) and, in the metadata, the operator list in
-//! execution order with TFLite's options. [`Graph`] runs exactly that list. Tensors of rank 4
-//! are NCHW here while the graph's shapes and axes are TFLite's NHWC; [`Graph::forward`] maps
-//! between the two where an operator needs it (padding, reshape, concatenation) and checks
-//! every operator's output shape against the one the file records.
+//! the constant tensors (as MediaPipe ships them, laid out for NCHW) and, in the metadata, the
+//! operator list in execution order with TFLite's options. [`Graph`] runs exactly that list:
+//! the convolutional networks (detector, Face Mesh v1 and v2) and the blendshape head (an
+//! MLP-Mixer of 1x1 convolutions, transposes and layer norms built from reductions). Tensors
+//! of rank 4 are NCHW here while the graph's shapes and axes are TFLite's NHWC;
+//! [`Graph::forward`] maps between the two where an operator needs it (padding, reshape,
+//! concatenation, reductions, transposes, slices, broadcasting against lower-rank operands)
+//! and checks every operator's output shape against the one the file records.
 
 use std::collections::BTreeMap;
 
@@ -71,6 +74,41 @@ enum Kind {
     Reshape,
     Relu,
     Prelu,
+    Logistic,
+    Neg,
+    Sqrt,
+    Rsqrt,
+    Sub {
+        activation: Activation,
+    },
+    Mul {
+        activation: Activation,
+    },
+    Div {
+        activation: Activation,
+    },
+    SquaredDifference {
+        activation: Activation,
+    },
+    /// Reductions over TFLite axes.
+    Mean {
+        axes: Vec<usize>,
+        keep_dims: bool,
+    },
+    Sum {
+        axes: Vec<usize>,
+        keep_dims: bool,
+    },
+    /// A permutation of TFLite axes.
+    Transpose {
+        perm: Vec<usize>,
+    },
+    /// Per TFLite axis `[start, stop, step]` (masks and negative bounds already resolved by
+    /// the converter), then the `squeeze`d axes removed.
+    StridedSlice {
+        ranges: Vec<[usize; 3]>,
+        squeeze: Vec<usize>,
+    },
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -88,8 +126,8 @@ pub struct Graph {
     ops: Vec<Op>,
     constants: BTreeMap<String, Tensor>,
     input: String,
-    /// NHWC, as TFLite gives it.
-    pub input_shape: [usize; 4],
+    /// As TFLite gives it (NHWC for an image).
+    pub input_shape: Vec<usize>,
     outputs: Vec<String>,
 }
 
@@ -115,10 +153,11 @@ impl Graph {
             serde_json::from_str(text).map_err(|e| format!("metadata `{key}`: {e}"))
         }
         let ops: Vec<Op> = json("graph", &field("graph")?).map_err(format)?;
-        let shape: Vec<usize> = json("input_shape", &field("input_shape")?).map_err(format)?;
-        let input_shape: [usize; 4] = shape
-            .try_into()
-            .map_err(|_| format("input_shape is not NHWC".into()))?;
+        let input_shape: Vec<usize> =
+            json("input_shape", &field("input_shape")?).map_err(format)?;
+        if input_shape.len() < 2 {
+            return Err(format(format!("input_shape {input_shape:?} has no size")));
+        }
         let outputs: Vec<String> = json("outputs", &field("outputs")?).map_err(format)?;
         let candle = |source| GraphError::Candle {
             name: name.to_string(),
@@ -264,7 +303,102 @@ impl Graph {
             }
             Kind::Relu => arg(0)?.relu(),
             Kind::Prelu => prelu(arg(0)?, arg(1)?),
+            Kind::Logistic => (arg(0)?.neg()?.exp()? + 1.0)?.recip(),
+            Kind::Neg => arg(0)?.neg(),
+            Kind::Sqrt => arg(0)?.sqrt(),
+            Kind::Rsqrt => arg(0)?.sqrt()?.recip(),
+            Kind::Sub { activation } => {
+                let (a, b) = aligned(arg(0)?, arg(1)?)?;
+                activate(a.broadcast_sub(&b)?, *activation)
+            }
+            Kind::Mul { activation } => {
+                let (a, b) = aligned(arg(0)?, arg(1)?)?;
+                activate(a.broadcast_mul(&b)?, *activation)
+            }
+            Kind::Div { activation } => {
+                let (a, b) = aligned(arg(0)?, arg(1)?)?;
+                activate(a.broadcast_div(&b)?, *activation)
+            }
+            Kind::SquaredDifference { activation } => {
+                let (a, b) = aligned(arg(0)?, arg(1)?)?;
+                activate(a.broadcast_sub(&b)?.sqr()?, *activation)
+            }
+            Kind::Mean { axes, keep_dims } => in_tflite_layout(arg(0)?, |x| {
+                let y = x.mean_keepdim(axes.as_slice())?;
+                squeezed(y, axes, *keep_dims)
+            }),
+            Kind::Sum { axes, keep_dims } => in_tflite_layout(arg(0)?, |x| {
+                let y = x.sum_keepdim(axes.as_slice())?;
+                squeezed(y, axes, *keep_dims)
+            }),
+            Kind::Transpose { perm } => {
+                in_tflite_layout(arg(0)?, |x| x.permute(perm.as_slice())?.contiguous())
+            }
+            Kind::StridedSlice { ranges, squeeze } => in_tflite_layout(arg(0)?, |x| {
+                let mut y = x.clone();
+                for (axis, &[start, stop, step]) in ranges.iter().enumerate() {
+                    let len = stop.saturating_sub(start);
+                    if step == 1 {
+                        y = y.narrow(axis, start, len)?;
+                    } else {
+                        let picks: Vec<u32> =
+                            (start..stop).step_by(step).map(|i| i as u32).collect();
+                        let n = picks.len();
+                        y = y.index_select(&Tensor::from_vec(picks, n, y.device())?, axis)?;
+                    }
+                }
+                squeezed(y.contiguous()?, squeeze, false)
+            }),
         }
+    }
+}
+
+/// Runs `f` on the tensor in TFLite's layout (NHWC for rank 4) and brings a rank-4 result
+/// back to NCHW: for operators whose axes or shapes are TFLite's.
+fn in_tflite_layout(
+    x: &Tensor,
+    f: impl FnOnce(&Tensor) -> candle_core::Result<Tensor>,
+) -> candle_core::Result<Tensor> {
+    let x = if x.rank() == 4 {
+        x.permute((0, 2, 3, 1))?.contiguous()?
+    } else {
+        x.clone()
+    };
+    let y = f(&x)?;
+    if y.rank() == 4 {
+        y.permute((0, 3, 1, 2))?.contiguous()
+    } else {
+        Ok(y)
+    }
+}
+
+/// `y` with the (kept, size-1) `axes` removed unless `keep_dims`.
+fn squeezed(y: Tensor, axes: &[usize], keep_dims: bool) -> candle_core::Result<Tensor> {
+    if keep_dims {
+        return Ok(y);
+    }
+    let mut y = y;
+    let mut axes = axes.to_vec();
+    axes.sort_unstable();
+    for &a in axes.iter().rev() {
+        y = y.squeeze(a)?;
+    }
+    Ok(y)
+}
+
+/// Two operands of an element-wise operator made ready for NCHW broadcasting: TFLite
+/// broadcasts trailing NHWC axes, so a lower-rank operand beside a rank-4 one (a per-channel
+/// scale of shape `[C]`, a scalar) is padded to NHWC rank 4 and turned to NCHW.
+fn aligned(a: &Tensor, b: &Tensor) -> candle_core::Result<(Tensor, Tensor)> {
+    let lift = |t: &Tensor| -> candle_core::Result<Tensor> {
+        let mut dims = vec![1usize; 4 - t.rank()];
+        dims.extend_from_slice(t.dims());
+        t.reshape(dims)?.permute((0, 3, 1, 2))
+    };
+    match (a.rank(), b.rank()) {
+        (4, r) if r < 4 => Ok((a.clone(), lift(b)?)),
+        (r, 4) if r < 4 => Ok((lift(a)?, b.clone())),
+        _ => Ok((a.clone(), b.clone())),
     }
 }
 

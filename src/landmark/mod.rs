@@ -1,17 +1,20 @@
-//! Photos to face landmarks: MediaPipe's face detector (BlazeFace, short range) and Face Mesh
-//! landmark network, run in candle on the CPU with MediaPipe's own weights
-//! (`assets/landmarker/`, converted once by `tools/landmarker/convert_mediapipe.py`; Apache-2.0,
-//! see `assets/landmarker/NOTICE`). The weights are compiled into the binary: nothing is
-//! downloaded or read at run time.
+//! Photos to face landmarks and blendshapes: MediaPipe's face detector (BlazeFace, short
+//! range), its Face Mesh landmark networks (v1: 468 points; v2, the Face Landmarker task's:
+//! 478 with the irises) and the Face Landmarker's blendshape head (52 ARKit-named scores),
+//! run in candle on the CPU with MediaPipe's own weights (`assets/landmarker/`, converted once
+//! by `tools/landmarker/convert_mediapipe.py`; Apache-2.0, see `assets/landmarker/NOTICE`).
+//! The weights are compiled into the binary: nothing is downloaded or read at run time.
 //!
-//! The pipeline is MediaPipe's (`face_landmark_front_cpu`): the detector on the letterboxed
-//! image -> a rotated square around the face from the two eye keypoints, 1.5x the box -> a
-//! 192x192 crop by affine warp -> 468 landmarks -> back to image pixels. In a video the next
-//! frame's crop comes from the previous frame's landmarks (eye corners 33 and 263) while the
-//! face score holds.
+//! The pipeline is MediaPipe's: the detector on the letterboxed image -> a rotated box around
+//! the face from the two eye keypoints, 1.5x the detection (v1, `face_landmark_front_cpu`:
+//! made square; v2, the Face Landmarker task: as the box is) -> an affine crop (192x192 for
+//! v1, 256x256 for v2) -> landmarks -> back to image pixels. In a video the next frame's crop
+//! comes from the previous frame's landmarks (eye corners 33 and 263, made square) while the
+//! face score holds. The blendshape head reads the x, y pixels of 146 of the 478 points.
 //!
 //! Pure computation on RGB pixels: decoding files is `io::photo`'s work.
 
+pub mod blendshapes;
 pub mod detect;
 pub mod graph;
 pub mod metric;
@@ -19,16 +22,45 @@ pub mod warp;
 
 use candle_core::{Device, Tensor};
 
+pub use blendshapes::{BlendshapeNetwork, Blendshapes, BLENDSHAPE_NAMES};
 pub use detect::{Detection, Detector};
 pub use graph::{Graph, GraphError};
 pub use warp::{RgbFrame, RotatedRect};
 
 const DETECTOR_BYTES: &[u8] =
     include_bytes!("../../assets/landmarker/face_detection_short_range.safetensors");
-const MESH_BYTES: &[u8] = include_bytes!("../../assets/landmarker/face_landmark.safetensors");
+const MESH_V1_BYTES: &[u8] = include_bytes!("../../assets/landmarker/face_landmark.safetensors");
+const MESH_V2_BYTES: &[u8] =
+    include_bytes!("../../assets/landmarker/face_landmarks_detector.safetensors");
 
-/// Number of Face Mesh landmarks (the vertices of the canonical face).
+/// Number of Face Mesh landmarks that are vertices of the canonical face (v1's whole output,
+/// v2's first 468).
 pub const MESH_POINTS: usize = 468;
+
+/// Face Mesh v2's landmarks: the 468 of the mesh, then the right iris (centre 468 and four
+/// points) and the left iris (centre 473 and four points).
+pub const MESH_V2_POINTS: usize = 478;
+
+/// Which Face Mesh network, with its crop.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum MeshVersion {
+    /// Face Mesh v1 (`face_landmark.tflite`, 192x192, 468 points), as MediaPipe's legacy
+    /// FaceMesh solution runs it.
+    V1,
+    /// Face Mesh v2 (`face_landmarks_detector.tflite` of the Face Landmarker task, 256x256,
+    /// 478 points): the points the blendshape head reads.
+    #[default]
+    V2,
+}
+
+impl MeshVersion {
+    pub fn name(self) -> &'static str {
+        match self {
+            MeshVersion::V1 => "mediapipe-face-mesh-v1",
+            MeshVersion::V2 => "mediapipe-face-mesh-v2",
+        }
+    }
+}
 
 /// The face score below which a tracked face is dropped and the frame detected again.
 /// MediaPipe's default is 0.5 (`min_tracking_confidence`), but its landmark network scores a
@@ -37,7 +69,8 @@ pub const MESH_POINTS: usize = 468;
 /// being tracked into the next shot.
 pub const TRACKING_SCORE: f64 = 0.9;
 
-/// Face Mesh: 468 landmarks in image pixels (z scaled like x) and the network's face score.
+/// Face Mesh: 468 (v1) or 478 (v2) landmarks in image pixels (z scaled like x) and the
+/// network's face score.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FaceMesh {
     pub points: Vec<[f64; 3]>,
@@ -50,21 +83,32 @@ pub struct FaceMesh {
 /// The face landmark network.
 pub struct MeshNetwork {
     graph: Graph,
+    pub version: MeshVersion,
 }
 
 impl MeshNetwork {
-    pub fn new() -> Result<MeshNetwork, GraphError> {
-        Ok(MeshNetwork {
-            graph: Graph::from_bytes("face_landmark", MESH_BYTES)?,
-        })
+    pub fn new(version: MeshVersion) -> Result<MeshNetwork, GraphError> {
+        let graph = match version {
+            MeshVersion::V1 => Graph::from_bytes("face_landmark", MESH_V1_BYTES)?,
+            MeshVersion::V2 => Graph::from_bytes("face_landmarks_detector", MESH_V2_BYTES)?,
+        };
+        Ok(MeshNetwork { graph, version })
     }
 
-    /// Input side (192).
+    /// Input side (192 for v1, 256 for v2).
     pub fn size(&self) -> usize {
         self.graph.input_shape[1]
     }
 
-    /// The 468 landmarks of the face inside `rect` (MediaPipe's ROI: rotated, square).
+    /// Number of landmarks (468 for v1, 478 for v2).
+    pub fn points(&self) -> usize {
+        match self.version {
+            MeshVersion::V1 => MESH_POINTS,
+            MeshVersion::V2 => MESH_V2_POINTS,
+        }
+    }
+
+    /// The landmarks of the face inside `rect` (MediaPipe's ROI: rotated).
     pub fn run(&self, frame: &RgbFrame, rect: &RotatedRect) -> Result<FaceMesh, GraphError> {
         let size = self.size();
         let crop = warp::crop(frame, rect, size, warp::Border::Replicate, [0.0, 1.0]);
@@ -72,7 +116,17 @@ impl MeshNetwork {
         let out = self.graph.forward(&input)?;
         let raw = to_vec(&out[0])?;
         let score = sigmoid(to_vec(&out[1])?[0] as f64);
-        let points = (0..MESH_POINTS)
+        if raw.len() != 3 * self.points() {
+            return Err(GraphError::Format {
+                name: self.version.name().into(),
+                message: format!(
+                    "{} landmark values, expected {}",
+                    raw.len(),
+                    3 * self.points()
+                ),
+            });
+        }
+        let points = (0..self.points())
             .map(|i| {
                 let (x, y, z) = (
                     raw[3 * i] as f64,
@@ -90,10 +144,11 @@ impl MeshNetwork {
     }
 }
 
-/// Detector and landmark network together, with MediaPipe's thresholds.
+/// Detector, landmark network and blendshape head together, with MediaPipe's thresholds.
 pub struct Landmarker {
     pub detector: Detector,
     pub mesh: MeshNetwork,
+    pub blendshapes: BlendshapeNetwork,
 }
 
 /// One face found in a photo.
@@ -104,14 +159,30 @@ pub struct Face {
 }
 
 impl Landmarker {
+    /// The default landmarker: Face Mesh v2, as the Face Landmarker task runs it.
     pub fn new() -> Result<Landmarker, GraphError> {
+        Landmarker::with(MeshVersion::default())
+    }
+
+    pub fn with(version: MeshVersion) -> Result<Landmarker, GraphError> {
         Ok(Landmarker {
             detector: Detector::new(Graph::from_bytes(
                 "face_detection_short_range",
                 DETECTOR_BYTES,
             )?),
-            mesh: MeshNetwork::new()?,
+            mesh: MeshNetwork::new(version)?,
+            blendshapes: BlendshapeNetwork::new()?,
         })
+    }
+
+    /// The blendshape scores of a face, where its landmarks are Face Mesh v2's (v1's 468
+    /// points lack the irises the head reads).
+    pub fn blendshapes(&self, mesh: &FaceMesh) -> Result<Option<Blendshapes>, GraphError> {
+        if mesh.points.len() == MESH_V2_POINTS {
+            self.blendshapes.scores(&mesh.points).map(Some)
+        } else {
+            Ok(None)
+        }
     }
 
     /// Every face the detector finds (largest first) with its landmarks; faces whose mesh score
@@ -119,7 +190,7 @@ impl Landmarker {
     pub fn faces(&self, frame: &RgbFrame) -> Result<Vec<Face>, GraphError> {
         let mut faces = Vec::new();
         for detection in self.detector.detect(frame)? {
-            let rect = detection.face_rect();
+            let rect = detection.face_rect(self.mesh.version);
             let mesh = self.mesh.run(frame, &rect)?;
             if mesh.score >= 0.5 {
                 faces.push(Face { detection, mesh });
@@ -137,7 +208,7 @@ impl Landmarker {
         frame: &RgbFrame,
         previous: &FaceMesh,
     ) -> Result<Option<FaceMesh>, GraphError> {
-        let rect = RotatedRect::from_landmarks(&previous.points);
+        let rect = RotatedRect::from_landmarks(&previous.points[..MESH_POINTS]);
         let mesh = self.mesh.run(frame, &rect)?;
         Ok((mesh.score >= TRACKING_SCORE).then_some(mesh))
     }
@@ -232,6 +303,15 @@ mod tests {
 
     #[test]
     fn mesh_network_matches_tflite() {
-        check("face_landmark", MESH_BYTES, ["conv2d_21", "conv2d_31"]);
+        check("face_landmark", MESH_V1_BYTES, ["conv2d_21", "conv2d_31"]);
+    }
+
+    #[test]
+    fn mesh_v2_network_matches_tflite() {
+        check(
+            "face_landmarks_detector",
+            MESH_V2_BYTES,
+            ["Identity", "Identity_1"],
+        );
     }
 }

@@ -79,6 +79,24 @@ impl RotatedRect {
         }
     }
 
+    /// The Face Landmarker task's crop of a detection (`FaceDetectorGraph`'s expanded rect): the
+    /// box turned so that the eyes are level and scaled 1.5x on each side, not made square;
+    /// the landmark network's input stretches it onto its square.
+    pub fn face_box(
+        center: [f64; 2],
+        width: f64,
+        height: f64,
+        start: [f64; 2],
+        end: [f64; 2],
+    ) -> RotatedRect {
+        let square = RotatedRect::face(center, width, height, start, end);
+        RotatedRect {
+            width: width * 1.5,
+            height: height * 1.5,
+            ..square
+        }
+    }
+
     /// The crop for the next video frame from this frame's landmarks
     /// (`face_landmark_landmarks_to_roi`): their bounding box, turned by the eye corners 33
     /// and 263.

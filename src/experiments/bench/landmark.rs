@@ -9,7 +9,8 @@ use std::time::Instant;
 use super::*;
 
 /// `facelab bench landmark`: the picture path per frame on the calling thread: detection,
-/// landmarks (MediaPipe's two networks), the metric fit and the observer, on a 640x360 frame
+/// landmarks (Face Mesh v2, the default, and v1), the blendshape head, the metric fit and the
+/// observer, on a 640x360 frame
 /// (the committed astronaut photo scaled into it), `frames` times each; then a `seconds`-long
 /// clip at 24 fps of that frame, from frames in memory to AU rows with tracking, as
 /// `observe` runs it.
@@ -17,7 +18,7 @@ pub fn bench_landmark(frames: usize, seconds: f64, out: &mut impl Write) -> Resu
     use crate::experiments::observe::model_observer;
     use crate::experiments::photos::{landmark_frames, openface_rows, InputKind};
     use crate::io::calibration::{default_calibration_path, read_calibration};
-    use crate::landmark::{metric, Landmarker, RgbFrame};
+    use crate::landmark::{metric, Landmarker, MeshNetwork, MeshVersion, RgbFrame};
 
     let path = crate::io::data_path("tests/data/landmarker/photos/astronaut.png");
     let photo = image::open(&path)
@@ -44,14 +45,24 @@ pub fn bench_landmark(frames: usize, seconds: f64, out: &mut impl Write) -> Resu
     };
     let detection = landmarker.detector.detect(&frame)?;
     let face = anyhow::Context::context(detection.first(), "the bench photo has a face")?.clone();
-    let rect = face.face_rect();
+    let rect = face.face_rect(landmarker.mesh.version);
     let mesh = landmarker.mesh.run(&frame, &rect)?;
+    let v1 = MeshNetwork::new(MeshVersion::V1)?;
+    let v1_rect = face.face_rect(MeshVersion::V1);
     let detect_ms = time(&mut || {
         std::hint::black_box(landmarker.detector.detect(&frame)?);
         Ok(())
     })?;
     let mesh_ms = time(&mut || {
         std::hint::black_box(landmarker.mesh.run(&frame, &rect)?);
+        Ok(())
+    })?;
+    let mesh_v1_ms = time(&mut || {
+        std::hint::black_box(v1.run(&frame, &v1_rect)?);
+        Ok(())
+    })?;
+    let blendshapes_ms = time(&mut || {
+        std::hint::black_box(landmarker.blendshapes.scores(&mesh.points)?);
         Ok(())
     })?;
     let fit_ms = time(&mut || {
@@ -65,18 +76,20 @@ pub fn bench_landmark(frames: usize, seconds: f64, out: &mut impl Write) -> Resu
     })?;
     line(out, "landmark.detect_ms", detect_ms, "ms")?;
     line(out, "landmark.mesh_ms", mesh_ms, "ms")?;
+    line(out, "landmark.mesh_v1_ms", mesh_v1_ms, "ms")?;
+    line(out, "landmark.blendshapes_ms", blendshapes_ms, "ms")?;
     line(out, "landmark.metric_fit_ms", fit_ms, "ms")?;
     line(out, "landmark.observe_ms", observe_ms, "ms")?;
     line(
         out,
         "landmark.frame_detect_ms",
-        detect_ms + mesh_ms + fit_ms + observe_ms,
+        detect_ms + mesh_ms + blendshapes_ms + fit_ms + observe_ms,
         "ms",
     )?;
     line(
         out,
         "landmark.frame_track_ms",
-        mesh_ms + fit_ms + observe_ms,
+        mesh_ms + blendshapes_ms + fit_ms + observe_ms,
         "ms",
     )?;
 
