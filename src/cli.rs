@@ -342,6 +342,15 @@ pub enum FaceCommand {
         #[arg(long)]
         out: PathBuf,
     },
+    /// What MediaPipe's blendshapes read on the face: rest, the six expressions at s = 1 and
+    /// each AU's muscles alone, from a frontal render and from the projected vertices.
+    Judge {
+        #[command(flatten)]
+        face: FaceArgs,
+        /// Folder for judge.csv and judge.png
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Solve every muscle group and jaw input alone, every pair of them and the six
     /// expressions at full activation; count non-converged, inverted, folded and crossed faces.
     Sweep {

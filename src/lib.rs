@@ -7,7 +7,8 @@
 //! `tests/architecture.rs`. Leaves: `rng` (the only source of randomness), `stats`, `cache`,
 //! `invert`. Computation: `sim` (the face and the neck), `observe` (landmarks -> AUs, pose),
 //! `learn` (the MLP), `cohort`, `landmark`, `edit`, `dataset` (the training data),
-//! `headneck` (the learned neck controller). Files: `io`. Configuration: `spec`. Output:
+//! `headneck` (the learned neck controller), `judge` (MediaPipe's blendshapes on pictures and
+//! faces). Files: `io`. Configuration: `spec`. Output:
 //! `report`. The harness: `experiments`.
 
 // Small dense matrix algebra reads best with explicit indices.
@@ -21,6 +22,7 @@ pub mod experiments;
 pub mod headneck;
 pub mod invert;
 pub mod io;
+pub mod judge;
 pub mod landmark;
 pub mod learn;
 pub mod observe;

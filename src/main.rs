@@ -377,6 +377,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     eprintln!("wrote {}", path.display());
                 }
             }
+            FaceCommand::Judge { face, out } => {
+                let (lines, written) =
+                    facelab::experiments::face::face_judge(&face.source(), &out)?;
+                let labels = facelab::judge::GROUP_LABELS;
+                println!("case\treading\t{}", labels.join("\t"));
+                for l in &lines {
+                    let cells: Vec<String> = match &l.scores {
+                        Some(s) => facelab::judge::groups(s)
+                            .iter()
+                            .map(|v| format!("{v:.2}"))
+                            .collect(),
+                        None => vec!["-".into(); labels.len()],
+                    };
+                    println!("{}\t{}\t{}", l.case, l.reading.name(), cells.join("\t"));
+                }
+                for path in written {
+                    eprintln!("wrote {}", path.display());
+                }
+            }
             FaceCommand::Sweep { face, out } => {
                 let lines = reach::write_sweep(&face.source(), &out)?;
                 for kind in ["single", "pair", "expression"] {

@@ -46,11 +46,12 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "sim", "observe", "learn", "cohort", "landmark", "io", "invert", "rng", "stats", "edit",
         ],
     ),
+    ("judge", &["sim", "landmark", "report"]),
     (
         "experiments",
         &[
             "sim", "observe", "learn", "cohort", "landmark", "io", "dataset", "headneck", "invert",
-            "rng", "stats", "edit", "spec", "cache", "report",
+            "rng", "stats", "edit", "spec", "cache", "report", "judge",
         ],
     ),
 ];

@@ -5,12 +5,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
+use crate::io::atomic::write_atomic;
 use crate::io::expressions::controls_activations;
 use crate::io::expressions::{default_expressions_path, read_expressions};
 use crate::io::mesh::{default_mesh_path, read_obj};
 use crate::io::reach::{default_reach_path, read_reach};
+use crate::judge::{groups, Judge, Reading, GROUPS, GROUP_LABELS};
+use crate::landmark::{Blendshapes, BLENDSHAPE_NAMES};
 use crate::observe::au::AU_NAMES;
 use crate::report::compose::contact_sheet;
+use crate::report::figures::heat_map_with;
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::controls::{control_names, JAW_ROTATION};
@@ -167,6 +171,101 @@ pub fn valid_pose(
     Ok(state)
 }
 
+/// Each AU's FACS muscles at full activation (the AU rows of the range-of-motion table;
+/// combined actions and second measures of an AU's face, `AU12_width`, are not AUs of their
+/// own).
+pub fn au_alone_cases() -> Result<Vec<(String, Activations)>> {
+    let mut out = Vec::new();
+    for row in read_reach(&default_reach_path())? {
+        if crate::observe::au::au_index(&row.row).is_none_or(|k| AU_NAMES[k] != row.row) {
+            continue;
+        }
+        let a = controls_activations(&row.controls)
+            .map_err(|e| anyhow::anyhow!("reach row {}: {e}", row.row))?;
+        out.push((row.row, a));
+    }
+    Ok(out)
+}
+
+/// A line of `judge.csv`: one face, one reading, MediaPipe's 52 scores.
+pub struct JudgeLine {
+    pub case: String,
+    pub reading: Reading,
+    pub scores: Option<Blendshapes>,
+}
+
+/// `facelab face judge`: what MediaPipe's blendshapes read on the face at rest, the six
+/// expressions at s = 1 and each AU's muscles alone, rendered frontally (`render`) and from
+/// the projected vertices (`mesh`). Writes `judge.csv` (`case,reading,success` and the 52
+/// scores) and `judge.png` (the groups of the render reading as a heat map).
+pub fn face_judge(source: &FaceSource, out: &Path) -> Result<(Vec<JudgeLine>, Vec<PathBuf>)> {
+    let model = source.model()?;
+    let weights = source.weights()?;
+    let judge = Judge::new()?;
+    let mut ws = Workspace::new(&model)?;
+    let mut cases = vec![("rest".to_string(), Activations::neutral())];
+    for e in Expression::ALL {
+        cases.push((format!("{e} (s = 1)"), weights.activations(e, 1.0)));
+    }
+    for (au, a) in au_alone_cases()? {
+        cases.push((format!("{au} alone"), a));
+    }
+    let options = RenderOptions::default();
+    let mut lines = Vec::new();
+    for (case, a) in &cases {
+        let state = valid_pose(&model, a, &mut ws, case)?;
+        for reading in [Reading::Render, Reading::Mesh] {
+            lines.push(JudgeLine {
+                case: case.clone(),
+                reading,
+                scores: judge.face(&model, &state, &options, reading)?,
+            });
+        }
+    }
+    let mut text = format!("case,reading,success,{}\n", BLENDSHAPE_NAMES.join(","));
+    for l in &lines {
+        text.push_str(&format!("{},{},", l.case, l.reading.name()));
+        match &l.scores {
+            Some(s) => {
+                text.push('1');
+                for v in s {
+                    text.push_str(&format!(",{v:.4}"));
+                }
+            }
+            None => text.push_str(&format!("0{}", ",".repeat(BLENDSHAPE_NAMES.len()))),
+        }
+        text.push('\n');
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let csv = out.join("judge.csv");
+    write_atomic(&csv, text.as_bytes())?;
+    let rows: Vec<&JudgeLine> = lines
+        .iter()
+        .filter(|l| l.reading == Reading::Render)
+        .collect();
+    let png = out.join("judge.png");
+    heat_map_with(
+        &png,
+        "MediaPipe's blendshapes on facelab's face (render reading; left and right averaged)",
+        &rows.iter().map(|l| l.case.clone()).collect::<Vec<_>>(),
+        &GROUP_LABELS
+            .iter()
+            .map(|s| s.to_string())
+            .collect::<Vec<_>>(),
+        &rows
+            .iter()
+            .map(|l| {
+                l.scores
+                    .as_ref()
+                    .map_or(vec![0.0; GROUPS.len()], |s| groups(s).to_vec())
+            })
+            .collect::<Vec<_>>(),
+        1.0,
+        2,
+    )?;
+    Ok((lines, vec![csv, png]))
+}
+
 /// `facelab render`.
 pub fn render_to(
     source: &FaceSource,
@@ -241,16 +340,9 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
             out.join("single").join(format!("{name}.png")),
         )?;
     }
-    for row in read_reach(&default_reach_path())? {
-        // One picture per AU: combined actions and second measures of an AU's face
-        // (`AU12_width`) are not AUs of their own.
-        if crate::observe::au::au_index(&row.row).is_none_or(|k| AU_NAMES[k] != row.row) {
-            continue;
-        }
-        let a = controls_activations(&row.controls)
-            .map_err(|e| anyhow::anyhow!("reach row {}: {e}", row.row))?;
-        let state = valid_pose(&model, &a, &mut ws, &row.row)?;
-        sheet.push((format!("{} alone", row.row), render(&model, &state, &small)));
+    for (au, a) in au_alone_cases()? {
+        let state = valid_pose(&model, &a, &mut ws, &au)?;
+        sheet.push((format!("{au} alone"), render(&model, &state, &small)));
     }
     let sheet_path = out.join("contact_sheet.png");
     save_png(

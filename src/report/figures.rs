@@ -380,8 +380,21 @@ pub fn heat_map(
     values: &[Vec<f64>],
     max: f64,
 ) -> Result<()> {
+    heat_map_with(path, title, rows, columns, values, max, 1)
+}
+
+/// [`heat_map`] with values printed to `decimals` places (cells widen to fit).
+pub fn heat_map_with(
+    path: &Path,
+    title: &str,
+    rows: &[String],
+    columns: &[String],
+    values: &[Vec<f64>],
+    max: f64,
+    decimals: usize,
+) -> Result<()> {
     register_font();
-    let (cell_w, cell_h) = (54u32, 26u32);
+    let (cell_w, cell_h) = (46u32 + 8 * decimals as u32, 26u32);
     let (left, top, right, bottom) = (330u32, 90u32, 30u32, 30u32);
     let size = (
         left + cell_w * columns.len() as u32 + right,
@@ -422,7 +435,11 @@ pub fn heat_map(
                 ))?;
                 let ink = if t > 0.6 { WHITE } else { BLACK };
                 let style = TextStyle::from(("sans-serif", 15).into_font()).color(&ink);
-                root.draw(&Text::new(format!("{v:.1}"), (x + 14, y + 5), style))?;
+                root.draw(&Text::new(
+                    format!("{v:.decimals$}"),
+                    (x + 10, y + 5),
+                    style,
+                ))?;
             }
         }
         root.present()?;

@@ -103,9 +103,12 @@ pub fn head_motion(model: &FaceModel, state: &State) -> (Rot3, V3) {
     align(&rest, &now)
 }
 
+/// The iris's radius (m).
+const IRIS_RADIUS: f64 = 5.9e-3;
+
 /// A sphere's eye: white, with the iris and pupil around `+z` (looking ahead).
 fn eyeball(centre: V3, radius: f64) -> Part {
-    let iris = (5.9e-3 / radius).min(0.9).asin();
+    let iris = (IRIS_RADIUS / radius).min(0.9).asin();
     let pupil = (1.8e-3 / radius).min(0.5).asin();
     Part::grid(
         33,
@@ -273,6 +276,45 @@ fn behind_face(mut part: Part, outline: &[V3], surface: &[V3]) -> Part {
     part
 }
 
+/// An eyeball's radius: just inside its lid opening at rest.
+fn eyeball_radius(eye: &crate::sim::rig::Eye, surface: &[V3]) -> f64 {
+    0.95 * eye
+        .contour
+        .iter()
+        .map(|&v| norm(sub(surface[v], eye.centre)))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The irises as Face Mesh v2 places its points 468-477, in the world frame of `state` (moved
+/// with the head): for the eye on the image's left (-x, the subject's right) and then the
+/// other, the iris centre on the front of the eyeball and four points on its rim, towards +x,
+/// +y, -x and -y (image right, up, left, down for a frontal camera).
+pub fn iris_points(model: &FaceModel, state: &State) -> [V3; 10] {
+    let rest = model.rest_state();
+    let surface = rest.surface(model.vertex_count());
+    let (r, t) = head_motion(model, state);
+    let mut eyes: Vec<&crate::sim::rig::Eye> = model.rig.eyes.iter().collect();
+    eyes.sort_by(|a, b| a.centre[0].total_cmp(&b.centre[0]));
+    let mut out = [[0.0; 3]; 10];
+    for (k, eye) in eyes.iter().enumerate() {
+        let radius = eyeball_radius(eye, surface);
+        let iris = IRIS_RADIUS.min(0.9 * radius);
+        let front = (radius * radius - iris * iris).sqrt();
+        let c = eye.centre;
+        let local = [
+            [0.0, 0.0, radius],
+            [iris, 0.0, front],
+            [0.0, iris, front],
+            [-iris, 0.0, front],
+            [0.0, -iris, front],
+        ];
+        for (j, d) in local.iter().enumerate() {
+            out[5 * k + j] = add(r.apply(add(c, *d)), t);
+        }
+    }
+    out
+}
+
 /// Every part for `state`, moved with the head (and the mandible).
 pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
     let n = model.vertex_count();
@@ -284,13 +326,7 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
     let mut out = Vec::new();
 
     for eye in &model.rig.eyes {
-        let radius = 0.95
-            * eye
-                .contour
-                .iter()
-                .map(|&v| norm(sub(surface[v], eye.centre)))
-                .fold(f64::INFINITY, f64::min);
-        out.push(eyeball(eye.centre, radius).moved(head, &r));
+        out.push(eyeball(eye.centre, eyeball_radius(eye, surface)).moved(head, &r));
     }
 
     // Teeth from the rest mouth: the contour's corners and its upper/lower midpoints.

@@ -305,6 +305,13 @@ fn surface_marks(model: &FaceModel) -> Vec<[f64; 3]> {
         .collect()
 }
 
+/// Image pixels (x right, y down) and view depth of world points as `render` draws them with
+/// `options` (no supersampling).
+pub fn project(options: &RenderOptions, points: &[V3]) -> Vec<[f64; 3]> {
+    let proj = Projector::new(&options.camera, options.width, options.height);
+    points.iter().map(|&p| proj.project(p)).collect()
+}
+
 /// Renders `state` of `model`.
 pub fn render(model: &FaceModel, state: &State, options: &RenderOptions) -> RgbImage {
     const SS: u32 = 2;
