@@ -126,8 +126,9 @@ pub enum Command {
     /// fit the observer to OpenFace on real faces (--fit).
     Observe {
         /// A photo (PNG, JPEG), a folder of frames, an animated GIF or a video (via ffmpeg),
-        /// through the built-in landmarker: writes openface.csv, landmarks.csv and the
-        /// landmarks drawn into the folder --out
+        /// through the built-in landmarker: writes openface.csv, landmarks.csv,
+        /// blendshapes.csv (MediaPipe's 52 ARKit-named scores per frame) and the landmarks
+        /// drawn into the folder --out
         #[arg(conflicts_with_all = ["openface", "fit", "calibrate"], requires = "out")]
         input: Option<PathBuf>,
         /// For a picture input: the neutral face [default: model for one picture, median
@@ -271,6 +272,10 @@ pub enum Command {
         /// results/headpose/latest [default: the --model folder]
         #[arg(long, conflicts_with = "ignore_pose")]
         neck: Option<PathBuf>,
+        /// Skip the judge (MediaPipe's blendshapes of the input and the transferred face:
+        /// fidelity.csv, fidelity.md)
+        #[arg(long)]
+        no_judge: bool,
         /// Output file or folder
         #[arg(long)]
         out: PathBuf,

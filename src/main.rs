@@ -269,6 +269,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             frames,
             ignore_pose,
             neck,
+            no_judge,
             out,
         } => {
             let input = input.or(openface).expect("clap requires an input");
@@ -284,6 +285,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     neck,
                     pictures: None,
                     openface_bytes: None,
+                    input_blendshapes: None,
+                    judge: !no_judge,
                 },
                 normalize.map(|n| Normalization::parse(&n).expect("clap checked")),
                 neutral.as_deref().map(photo_neutral),
@@ -305,6 +308,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             if let Some((rms, max)) = summary.pose_error {
                 println!("head pose through the neck: RMS error {rms:.2} deg, max {max:.2} deg");
+            }
+            if let Some(f) = &summary.fidelity {
+                for line in &f.summary {
+                    println!("{line}");
+                }
             }
             println!(
                 "{} frames transferred, {} skipped (success = 0); AU MSE mean {:.4}",

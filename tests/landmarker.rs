@@ -220,7 +220,12 @@ fn a_photo_is_observed_into_an_openface_file_and_the_smile_reads_as_one() {
         let (ok, stdout, err) = facelab(&["observe", &photo(stem), "--out", out.to_str().unwrap()]);
         assert!(ok, "{err}");
         assert!(stdout.contains("a face in 1 frame(s)"), "{stdout}");
-        for f in ["openface.csv", "landmarks.csv", "landmarks.png"] {
+        for f in [
+            "openface.csv",
+            "landmarks.csv",
+            "blendshapes.csv",
+            "landmarks.png",
+        ] {
             assert!(out.join(f).exists(), "{f}");
         }
         let lines = std::fs::read_to_string(out.join("landmarks.csv"))
@@ -242,6 +247,29 @@ fn a_photo_is_observed_into_an_openface_file_and_the_smile_reads_as_one() {
         "{rows:?}"
     );
     assert!(au(&rows[1], "AU06") > au(&rows[0], "AU06") + 0.3);
+    // MediaPipe's blendshapes beside them, under MediaPipe's names: the smile it reads on the
+    // joy render (0.28 in the real MediaPipe, whose reference is committed) and not at rest.
+    let smile = |stem: &str| {
+        let text = std::fs::read_to_string(dir.join(stem).join("blendshapes.csv")).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 2, "{stem}: a header and one frame");
+        let header: Vec<&str> = lines[0].split(',').collect();
+        assert_eq!(&header[..4], &["frame", "timestamp", "success", "_neutral"]);
+        assert_eq!(header.len(), 3 + 52);
+        let row: Vec<&str> = lines[1].split(',').collect();
+        assert_eq!(row[2], "1");
+        let at = |name: &str| -> f64 {
+            row[header.iter().position(|h| *h == name).unwrap()]
+                .parse()
+                .unwrap()
+        };
+        (at("mouthSmileLeft") + at("mouthSmileRight")) / 2.0
+    };
+    let (rest, joy) = (smile("render_rest"), smile("render_joy"));
+    assert!(
+        joy > 0.2 && rest < 0.05,
+        "smile at rest {rest}, in joy {joy}"
+    );
     // A frontal render: the head pose comes out near zero.
     for r in &rows {
         let p = r.pose.unwrap();
@@ -290,6 +318,13 @@ fn a_folder_and_a_gif_give_one_row_per_frame_with_no_face_frames_marked() {
         let file = facelab::io::openface::read_openface(&out.join("openface.csv")).unwrap();
         assert_eq!((file.rows.len(), file.skipped), (3, 1), "{name}");
         assert!(out.join("landmarks.gif").exists());
+        // The no-face frame: success 0 and 52 empty scores.
+        let text = std::fs::read_to_string(out.join("blendshapes.csv")).unwrap();
+        let last = text.lines().nth(4).unwrap();
+        assert_eq!(
+            last,
+            format!("4,{},0{}", last.split(',').nth(1).unwrap(), ",".repeat(52))
+        );
     }
 }
 
@@ -462,6 +497,28 @@ fn a_photo_transfers_with_the_picture_beside_the_face() {
     // The render is the picture (cut to the face) beside the model's face: wider than tall.
     let (w, h) = image::image_dimensions(out.join("frame_00001.png")).unwrap();
     assert!(w > h, "{w}x{h}");
+    // The judge: MediaPipe's scores of the picture (as blendshapes.csv has them) beside the
+    // transferred face's, read from a render and from the mesh.
+    assert!(
+        stdout.contains("judge (render): of ") && stdout.contains("judge (mesh): of "),
+        "{stdout}"
+    );
+    let fidelity = std::fs::read_to_string(out.join("fidelity.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = fidelity.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 3, "a header, then frame 1 read two ways");
+    assert_eq!((rows[1][1], rows[2][1]), ("render", "mesh"));
+    let shapes = std::fs::read_to_string(out.join("blendshapes.csv")).unwrap();
+    let input: Vec<&str> = shapes.lines().nth(1).unwrap().split(',').collect();
+    let k = rows[0]
+        .iter()
+        .position(|h| *h == "mouthSmileLeft_in")
+        .unwrap();
+    let smile_in: f64 = rows[1][k].parse().unwrap();
+    let smile_photo: f64 = input[3 + 44].parse().unwrap();
+    assert!(
+        (smile_in - smile_photo).abs() < 1e-3,
+        "{smile_in} vs {smile_photo}"
+    );
 
     // A run without a neck controller: the error comes before any work, nothing is written.
     let bare = crate::temp("landmarker", "transfer-no-neck").join("out");

@@ -257,6 +257,32 @@ fn transfer_command_writes_every_output_for_a_video() {
     ] {
         assert!(out.join(f).exists(), "{f} missing");
     }
+    // An OpenFace file has no picture: the judge reads the transferred face only, says so,
+    // and leaves the input's columns empty; the joy file's face smiles.
+    assert!(
+        stdout.contains("judge (render): an OpenFace file has no picture"),
+        "{stdout}"
+    );
+    let fidelity = std::fs::read_to_string(out.join("fidelity.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = fidelity.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows[0].len(), 4 + 2 * 52);
+    let mesh: Vec<&Vec<&str>> = rows.iter().filter(|r| r[1] == "mesh").collect();
+    assert_eq!(mesh.len(), 5, "a mesh reading per transferred frame");
+    let smile_out = rows[0]
+        .iter()
+        .position(|h| *h == "mouthSmileLeft_out")
+        .unwrap();
+    for r in &mesh {
+        assert_eq!((r[2], r[3], r[smile_out - 1]), ("", "1", ""));
+    }
+    let peak: f64 = mesh[4][smile_out].parse().unwrap();
+    assert!(
+        peak > 0.3,
+        "MediaPipe's smile on the joy file's last frame: {peak}"
+    );
+    assert!(std::fs::read_to_string(out.join("fidelity.md"))
+        .unwrap()
+        .contains("| smile |"));
 
     // The transferred face smiles more at the end than at the start.
     let au12 = |line: &str| -> f64 {

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod cell;
 pub mod editing;
 pub mod face;
+pub mod fidelity;
 pub mod headpose;
 pub mod inversion;
 pub mod observe;

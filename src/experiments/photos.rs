@@ -17,10 +17,11 @@ use std::process::{Command, Stdio};
 
 use anyhow::{bail, Context, Result};
 
+use crate::io::blendshapes::blendshapes_csv;
 use crate::io::openface::FaceRow;
 use crate::io::photo::decode_rgb;
 use crate::io::rows::{self, num, CsvRow};
-use crate::landmark::{metric, FaceMesh, Landmarker, RgbFrame, MESH_POINTS};
+use crate::landmark::{metric, Blendshapes, FaceMesh, Landmarker, RgbFrame, MESH_POINTS};
 use crate::observe::{landmarks, Calibration, Observer, AU_COUNT, LANDMARK_COUNT};
 use crate::sim::geom::V3;
 use crate::sim::FaceModel;
@@ -90,6 +91,8 @@ pub struct LandmarkedFrame {
     pub mesh: Option<FaceMesh>,
     /// The fit into the model's frame.
     pub metric: Option<metric::MetricFace>,
+    /// MediaPipe's 52 blendshape scores of the face (Face Mesh v2 landmarks only).
+    pub blendshapes: Option<Blendshapes>,
     /// Faces found by the detector in this frame (when it ran).
     pub faces_found: usize,
 }
@@ -316,10 +319,15 @@ pub fn landmark_frames(
             missing.push(i);
         }
         let metric = mesh.as_ref().map(|m| metric::fit(&m.points, rest));
+        let blendshapes = match &mesh {
+            Some(m) => landmarker.blendshapes(m)?,
+            None => None,
+        };
         previous = mesh.clone();
         found.push(LandmarkedFrame {
             mesh,
             metric,
+            blendshapes,
             faces_found,
         });
     }
@@ -489,8 +497,8 @@ pub struct LandmarkOutput {
     pub kind: InputKind,
     /// `DIR/openface.csv`.
     pub openface: PathBuf,
-    /// Files written, or to write, under `DIR`: `openface.csv` first, `landmarks.csv` and the
-    /// picture.
+    /// Files written, or to write, under `DIR`: `openface.csv` first, `landmarks.csv`,
+    /// `blendshapes.csv` and the picture.
     pub files: Vec<(&'static str, Vec<u8>)>,
     pub written: Vec<PathBuf>,
     /// Frames with a face, and without.
@@ -499,6 +507,8 @@ pub struct LandmarkOutput {
     pub warnings: Vec<String>,
     /// Each input frame with its landmarks drawn, cut to one window around the face.
     pub pictures: Vec<image::RgbImage>,
+    /// MediaPipe's blendshapes per input frame (`None`: no face).
+    pub blendshapes: Vec<Option<Blendshapes>>,
 }
 
 /// Photo/video -> landmarks -> `DIR/openface.csv` (OpenFace layout, our AUs under
@@ -598,9 +608,14 @@ pub fn landmark_files(
         };
         ("landmarks.gif", gif_bytes(&small, delay)?)
     };
+    let blendshapes: Vec<Option<Blendshapes>> = l.found.iter().map(|f| f.blendshapes).collect();
     let files = vec![
         ("openface.csv", bytes),
         ("landmarks.csv", landmarks_csv(&l).into_bytes()),
+        (
+            "blendshapes.csv",
+            blendshapes_csv(&blendshapes, l.fps).into_bytes(),
+        ),
         preview,
     ];
     Ok(LandmarkOutput {
@@ -612,6 +627,7 @@ pub fn landmark_files(
         missing: l.found.len() - faces,
         warnings: l.warnings,
         pictures: faces_only,
+        blendshapes,
     })
 }
 

@@ -12,12 +12,14 @@ use anyhow::{bail, Context, Result};
 use image::RgbImage;
 
 use super::face::FaceSource;
+use super::fidelity::{Fidelity, JudgeFrames};
 use super::observe::model_observer;
 use super::table2::{au_mse, predict_activations, solve_clip};
 use crate::headneck::{face_motion, posed_face, Learned};
 use crate::io::atomic::write_atomic;
 use crate::io::openface::{parse_openface, read_openface, write_openface, FaceRow};
 use crate::io::rows::{self, num, CsvRow};
+use crate::landmark::Blendshapes;
 use crate::learn::{Mlp, Normalization, Normalizer};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{gif_bytes, side_by_side};
@@ -47,6 +49,10 @@ pub struct TransferOptions {
     /// The OpenFace file's bytes when it is not on disk yet (the landmarker's, written
     /// beside the outputs only once the transfer succeeds); `openface` names it.
     pub openface_bytes: Option<Vec<u8>>,
+    /// MediaPipe's blendshapes of the input pictures, indexed like `pictures`.
+    pub input_blendshapes: Option<Vec<Option<Blendshapes>>>,
+    /// Read the transferred face with MediaPipe's blendshapes (`fidelity.csv`, `fidelity.md`).
+    pub judge: bool,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -60,6 +66,9 @@ pub struct TransferSummary {
     /// The AUs normalization passed through on their own reading: their spread across the
     /// file is below `table2::FLAT_SPREAD` (every AU of a single image).
     pub flat: Vec<usize>,
+    /// The judge's verdict per reading (with an input picture), or its reading of the
+    /// output alone (an OpenFace file).
+    pub fidelity: Option<Fidelity>,
     pub written: Vec<PathBuf>,
 }
 
@@ -223,6 +232,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         camera,
         ..RenderOptions::default()
     };
+    let mut judged = opts.judge.then(|| JudgeFrames::new(n, still)).transpose()?;
     let mut transferred = Vec::with_capacity(n);
     let mut stills: Vec<(i64, RgbImage)> = Vec::new();
     let mut frames: Vec<RgbImage> = Vec::new();
@@ -254,6 +264,9 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
                 Some(p) => side_by_side(p, &face),
                 None => face,
             };
+            if let Some(j) = judged.as_mut() {
+                j.read(&model, state, i)?;
+            }
             if wanted.contains(&frame) {
                 stills.push((frame, beside(render(&model, state, &still))));
             }
@@ -339,12 +352,40 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         save_png(image, &path)?;
         written.push(path);
     }
+    let fidelity = match judged {
+        Some(j) => {
+            let frames: Vec<i64> = file.rows.iter().map(|r| r.frame).collect();
+            let input: Option<Vec<Option<Blendshapes>>> =
+                opts.input_blendshapes.as_ref().map(|b| {
+                    frames
+                        .iter()
+                        .map(|f| {
+                            usize::try_from(f - 1)
+                                .ok()
+                                .and_then(|k| b.get(k).copied().flatten())
+                        })
+                        .collect()
+                });
+            let fidelity = j.finish(&frames, input);
+            for (name, bytes) in [
+                ("fidelity.csv", fidelity.csv.as_bytes()),
+                ("fidelity.md", fidelity.markdown.as_bytes()),
+            ] {
+                let path = out.join(name);
+                write_atomic(&path, bytes)?;
+                written.push(path);
+            }
+            Some(fidelity)
+        }
+        None => None,
+    };
     Ok(TransferSummary {
         rows: n,
         skipped: file.skipped,
         mse,
         pose_error,
         flat,
+        fidelity,
         written,
     })
 }
@@ -574,6 +615,7 @@ pub fn transfer_path(
         openface_bytes: Some(landmarked.files[0].1.clone()),
         normalize: normalize.unwrap_or(Normalization::None),
         pictures: Some(landmarked.pictures.clone()),
+        input_blendshapes: Some(landmarked.blendshapes.clone()),
         ..opts.clone()
     };
     let mut summary = transfer_openface(&opts)?;

@@ -3,6 +3,7 @@
 //! line.
 
 pub mod atomic;
+pub mod blendshapes;
 pub mod calibration;
 pub mod curves;
 pub mod expressions;
