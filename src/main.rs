@@ -309,6 +309,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if let Some((rms, max)) = summary.pose_error {
                 println!("head pose through the neck: RMS error {rms:.2} deg, max {max:.2} deg");
             }
+            if !summary.unsolved.is_empty() {
+                eprintln!(
+                    "warning: {} of {} frames did not converge and are written with success = \
+                     0, left out of the scores: {}",
+                    summary.unsolved.len(),
+                    summary.rows,
+                    summary.unsolved.join("; ")
+                );
+            }
             if let Some(f) = &summary.fidelity {
                 for line in &f.summary {
                     println!("{line}");

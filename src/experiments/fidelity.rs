@@ -207,3 +207,36 @@ impl JudgeFrames {
         }
     }
 }
+
+/// `blendshapes.png` for a clip: MediaPipe's smile, jaw open, eye blink, inner brow up and
+/// brow down (left and right averaged) over time, broken at frames without a face.
+pub fn blendshape_figure(scores: &[Option<Blendshapes>], fps: f64, name: &str) -> Result<Vec<u8>> {
+    let fps = if fps > 0.0 { fps } else { 1.0 };
+    let times: Vec<f64> = (0..scores.len()).map(|i| i as f64 / fps).collect();
+    let curves: Vec<(String, Vec<Option<f64>>)> = [
+        "smile",
+        "jaw open",
+        "eye blink",
+        "inner brow up",
+        "brow down",
+    ]
+    .iter()
+    .map(|g| {
+        let k = GROUPS
+            .iter()
+            .position(|(n, _)| n == g)
+            .expect("a judge group");
+        let v = scores
+            .iter()
+            .map(|s| s.as_ref().map(|s| groups(s)[k]))
+            .collect();
+        (g.to_string(), v)
+    })
+    .collect();
+    let image = crate::report::figures::score_curves(
+        &format!("MediaPipe's blendshapes of {name} (left and right averaged)"),
+        &times,
+        &curves,
+    )?;
+    crate::report::compose::png_bytes(&image)
+}

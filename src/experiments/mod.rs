@@ -8,6 +8,7 @@ pub mod fidelity;
 pub mod headpose;
 pub mod inversion;
 pub mod observe;
+pub mod photo_table;
 pub mod photos;
 pub mod pose_transfer;
 pub mod reach;
@@ -32,6 +33,7 @@ pub(crate) const EXPERIMENTS: &[&dyn Experiment] = &[
     &inversion::Inversion,
     &pose_transfer::PoseTransfer,
     &realfaces::Realfaces,
+    &photo_table::Photos,
 ];
 
 #[cfg(test)]

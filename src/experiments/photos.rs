@@ -609,7 +609,7 @@ pub fn landmark_files(
         ("landmarks.gif", gif_bytes(&small, delay)?)
     };
     let blendshapes: Vec<Option<Blendshapes>> = l.found.iter().map(|f| f.blendshapes).collect();
-    let files = vec![
+    let mut files = vec![
         ("openface.csv", bytes),
         ("landmarks.csv", landmarks_csv(&l).into_bytes()),
         (
@@ -618,6 +618,13 @@ pub fn landmark_files(
         ),
         preview,
     ];
+    if blendshapes.len() > 1 {
+        let file = input
+            .file_name()
+            .map_or(name.clone(), |f| f.to_string_lossy().into());
+        let figure = super::fidelity::blendshape_figure(&blendshapes, l.fps, &file)?;
+        files.push(("blendshapes.png", figure));
+    }
     Ok(LandmarkOutput {
         kind,
         openface: out.join("openface.csv"),
@@ -634,7 +641,7 @@ pub fn landmark_files(
 /// One window around the face for every frame (so a clip does not jitter): a square about
 /// the median centre of the landmark crops, as large as the largest, clamped to the image;
 /// `[x, y, width, height]` in pixels.
-fn face_window(l: &Landmarked) -> [u32; 4] {
+pub(crate) fn face_window(l: &Landmarked) -> [u32; 4] {
     let rects: Vec<_> = l
         .found
         .iter()

@@ -14,7 +14,7 @@ use image::RgbImage;
 use super::face::FaceSource;
 use super::fidelity::{Fidelity, JudgeFrames};
 use super::observe::model_observer;
-use super::table2::{au_mse, predict_activations, solve_clip};
+use super::table2::{au_mse, predict_activations};
 use crate::headneck::{face_motion, posed_face, Learned};
 use crate::io::atomic::write_atomic;
 use crate::io::openface::{parse_openface, read_openface, write_openface, FaceRow};
@@ -27,7 +27,7 @@ use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::controls::control_names;
 use crate::sim::neck::{simulate, BodyState, HeadPose, PoseSequence};
-use crate::sim::{solve_from_rest, SolveParams, Workspace};
+use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 
 #[derive(Clone, Debug)]
 pub struct TransferOptions {
@@ -59,6 +59,9 @@ pub struct TransferOptions {
 pub struct TransferSummary {
     pub rows: usize,
     pub skipped: usize,
+    /// Frames whose face did not converge from the previous frame nor from rest: written
+    /// with `success = 0` and left out of the scores, each with the solver's reason.
+    pub unsolved: Vec<String>,
     pub mse: [f64; AU_COUNT],
     /// RMS and largest angle (degrees) between the file's head pose and the neck's, when the
     /// pose drove the neck.
@@ -237,13 +240,24 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     let mut stills: Vec<(i64, RgbImage)> = Vec::new();
     let mut frames: Vec<RgbImage> = Vec::new();
     let mut ws = Workspace::new(&model)?;
-    solve_clip(
-        &model,
+    let mut solved = vec![true; n];
+    let failures = solve_clip_tolerant(
         &acts,
-        |a, ws| Ok(solve_from_rest(&model, a, ws, &params)?.0),
+        |a, previous: Option<&crate::sim::State>, ws| match previous {
+            Some(p) => {
+                let mut s = p.clone();
+                solve(&model, a, &mut s, ws, &params)?;
+                Ok(s)
+            }
+            None => Ok(solve_from_rest(&model, a, ws, &params)?.0),
+        },
         &mut ws,
-        &params,
         |i, state| {
+            let Some(state) = state else {
+                solved[i] = false;
+                transferred.push([0.0; AU_COUNT]);
+                return Ok(());
+            };
             let o = observer.observe(&landmarks(state.surface(model.vertex_count())))?;
             transferred.push(o.aus);
             let frame = file.rows[i].frame;
@@ -277,6 +291,17 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         },
     )
     .with_context(|| format!("{}: transferring", opts.openface.display()))?;
+    let unsolved: Vec<String> = failures
+        .iter()
+        .map(|(i, why)| format!("frame {}: {why}", file.rows[*i].frame))
+        .collect();
+    if unsolved.len() == n {
+        bail!(
+            "{}: the face converged in none of the {n} frames (first: {})",
+            opts.openface.display(),
+            unsolved[0]
+        );
+    }
 
     let out = &opts.out;
     let mut written = Vec::new();
@@ -287,6 +312,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         .enumerate()
         .map(|(i, (r, aus))| FaceRow {
             aus: *aus,
+            success: solved[i],
             // The neck's head rotation, with the file's translation.
             pose: head.as_ref().and_then(|h| {
                 let p = h.pose[i];
@@ -316,7 +342,16 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         Ok(())
     };
     write("activations.csv", text.as_bytes())?;
-    let mse = au_mse(&reference, &transferred);
+    // Frames the face could not be solved for are written with success = 0 and left out of
+    // the scores.
+    let (kept_ref, kept_out): (Vec<[f64; AU_COUNT]>, Vec<[f64; AU_COUNT]>) = reference
+        .iter()
+        .zip(&transferred)
+        .zip(&solved)
+        .filter(|(_, ok)| **ok)
+        .map(|((r, t), _)| (*r, *t))
+        .unzip();
+    let mse = au_mse(&kept_ref, &kept_out);
     let mean = mse.iter().sum::<f64>() / AU_COUNT as f64;
     let lines: Vec<MseLine> = AU_NAMES
         .iter()
@@ -382,12 +417,49 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     Ok(TransferSummary {
         rows: n,
         skipped: file.skipped,
+        unsolved,
         mse,
         pose_error,
         flat,
         fidelity,
         written,
     })
+}
+
+/// Solves a clip frame by frame, each from the previous solved frame (`solve(a, Some(prev))`)
+/// and, where that fails, again from rest (`solve(a, None)`, the continuation from neutral);
+/// a frame that fails both is handed to `each` as `None` and the next frame starts from the
+/// last solved one. Returns the failed frames with the solver's reason, so that one hard
+/// frame does not sink a file.
+pub fn solve_clip_tolerant<S: Clone>(
+    frames: &[Activations],
+    mut solve: impl FnMut(&Activations, Option<&S>, &mut Workspace) -> Result<S>,
+    ws: &mut Workspace,
+    mut each: impl FnMut(usize, Option<&S>) -> Result<()>,
+) -> Result<Vec<(usize, String)>> {
+    let mut last: Option<S> = None;
+    let mut failures = Vec::new();
+    for (i, a) in frames.iter().enumerate() {
+        let warm = last.as_ref().map(|p| solve(a, Some(p), ws));
+        let result = match warm {
+            Some(Ok(s)) => Ok(s),
+            Some(Err(first)) => {
+                solve(a, None, ws).map_err(|e| format!("{first:#}; from rest: {e:#}"))
+            }
+            None => solve(a, None, ws).map_err(|e| format!("{e:#}")),
+        };
+        match result {
+            Ok(s) => {
+                each(i, Some(&s))?;
+                last = Some(s);
+            }
+            Err(why) => {
+                each(i, None)?;
+                failures.push((i, why));
+            }
+        }
+    }
+    Ok(failures)
 }
 
 /// The neck's response to a file's head pose, per frame.
@@ -635,3 +707,52 @@ struct MseLine {
 }
 
 impl CsvRow for MseLine {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A clip whose frame 1 fails from the previous frame but solves from rest, and whose
+    /// frame 2 fails both ways: frame 2 alone is lost, named with both reasons, and frame 3
+    /// starts from frame 1's state.
+    #[test]
+    fn a_frame_that_fails_twice_is_skipped_and_the_clip_goes_on() {
+        let model = FaceSource::default().model().unwrap();
+        let mut ws = Workspace::new(&model).unwrap();
+        let frames = vec![Activations::neutral(); 4];
+        let mut starts = Vec::new();
+        let mut seen = Vec::new();
+        let failures = solve_clip_tolerant(
+            &frames,
+            |_, previous: Option<&usize>, _| {
+                let i = starts.len();
+                starts.push(previous.copied());
+                // Calls: 0 rest; 1 warm (fails), 1 rest; 2 warm (fails), 2 rest (fails); 3 warm.
+                match (i, previous) {
+                    (1, Some(_)) => anyhow::bail!("no convergence from frame 0"),
+                    (3, Some(_)) => anyhow::bail!("relative residual 8.8e-4 after 232 iterations"),
+                    (4, None) => anyhow::bail!("no convergence from rest"),
+                    _ => Ok(i),
+                }
+            },
+            &mut ws,
+            |i, s| {
+                seen.push((i, s.copied()));
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert_eq!(
+            seen,
+            vec![(0, Some(0)), (1, Some(2)), (2, None), (3, Some(5))]
+        );
+        assert_eq!(starts, vec![None, Some(0), None, Some(2), None, Some(2)]);
+        assert_eq!(failures.len(), 1);
+        assert_eq!(failures[0].0, 2);
+        assert!(
+            failures[0].1.contains("232 iterations") && failures[0].1.contains("from rest"),
+            "{}",
+            failures[0].1
+        );
+    }
+}

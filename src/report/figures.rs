@@ -446,3 +446,78 @@ pub fn heat_map_with(
     }
     save(buffer, size, path)
 }
+
+/// Scores in [0, 1] over time (seconds), one curve per `(label, values)`, broken where a
+/// value is `None` (a frame without a face): e.g. MediaPipe's blendshapes of a clip.
+pub fn score_curves(
+    title: &str,
+    times: &[f64],
+    curves: &[(String, Vec<Option<f64>>)],
+) -> Result<image::RgbImage> {
+    register_font();
+    let size = (1100u32, 480u32);
+    let mut buffer = vec![255u8; (size.0 * size.1 * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, size).into_drawing_area();
+        root.fill(&WHITE)?;
+        let root = root.titled(title, ("sans-serif", 24))?;
+        let x1 = times.last().copied().unwrap_or(1.0).max(1e-3);
+        let mut chart = ChartBuilder::on(&root)
+            .margin(16)
+            .x_label_area_size(48)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..x1, 0.0..1.35)?;
+        chart
+            .configure_mesh()
+            .x_desc("time (s)")
+            .y_desc("score")
+            .y_labels(8)
+            .label_style(("sans-serif", 16))
+            .axis_desc_style(("sans-serif", 18))
+            .draw()?;
+        for (k, (label, values)) in curves.iter().enumerate() {
+            let color = PALETTE[k % PALETTE.len()];
+            let style = ShapeStyle::from(&color).stroke_width(2);
+            let mut segment: Vec<(f64, f64)> = Vec::new();
+            let mut first = true;
+            let mut flush = |segment: &mut Vec<(f64, f64)>,
+                             chart: &mut ChartContext<
+                '_,
+                BitMapBackend<'_>,
+                Cartesian2d<
+                    plotters::coord::types::RangedCoordf64,
+                    plotters::coord::types::RangedCoordf64,
+                >,
+            >|
+             -> Result<()> {
+                if segment.is_empty() {
+                    return Ok(());
+                }
+                let drawn = chart.draw_series(LineSeries::new(segment.drain(..), style))?;
+                if first {
+                    drawn
+                        .label(label.as_str())
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+                    first = false;
+                }
+                Ok(())
+            };
+            for (t, v) in times.iter().zip(values) {
+                match v {
+                    Some(v) => segment.push((*t, *v)),
+                    None => flush(&mut segment, &mut chart)?,
+                }
+            }
+            flush(&mut segment, &mut chart)?;
+        }
+        chart
+            .configure_series_labels()
+            .label_font(("sans-serif", 16))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        root.present()?;
+    }
+    image::RgbImage::from_raw(size.0, size.1, buffer).ok_or_else(|| anyhow!("bad buffer"))
+}

@@ -26,7 +26,14 @@ pub use sections::{LauncherKind, LauncherParams};
 pub use sweep::cells;
 
 /// The tables a spec can ask for.
-pub const TABLES: [&str; 5] = ["table1", "table2", "inversion", "headpose", "realfaces"];
+pub const TABLES: [&str; 6] = [
+    "table1",
+    "table2",
+    "inversion",
+    "headpose",
+    "realfaces",
+    "photos",
+];
 
 /// Everything a run needs, validated.
 #[derive(Clone, Debug, PartialEq)]
