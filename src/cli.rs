@@ -276,6 +276,11 @@ pub enum Command {
         /// fidelity.csv, fidelity.md)
         #[arg(long)]
         no_judge: bool,
+        /// How a picture's expression becomes activations: `landmarks`, the landmark-space
+        /// fit to the person's landmark motion (the default for pictures), or `network`, the
+        /// run's unified network on the AUs (the only method for OpenFace files)
+        #[arg(long, value_parser = ["landmarks", "network"])]
+        method: Option<String>,
         /// Output file or folder
         #[arg(long)]
         out: PathBuf,

@@ -270,6 +270,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             ignore_pose,
             neck,
             no_judge,
+            method,
             out,
         } => {
             let input = input.or(openface).expect("clap requires an input");
@@ -287,9 +288,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     openface_bytes: None,
                     input_blendshapes: None,
                     judge: !no_judge,
+                    fitted: None,
                 },
                 normalize.map(|n| Normalization::parse(&n).expect("clap checked")),
                 neutral.as_deref().map(photo_neutral),
+                method
+                    .as_deref()
+                    .map(|m| transfer::TransferMethod::parse(m).expect("clap checked")),
             )?;
             if let Some(l) = &landmarked {
                 print_landmarked(l);

@@ -1,15 +1,19 @@
 //! The real-photo table (`tables = ["photos"]`): every committed licensed real picture of
-//! `experiments/photos.csv` through the cell's first unified network onto the face, judged two
-//! ways. facelab's own observer reads the picture's AUs (against the model's rest face, as
-//! `facelab transfer PHOTO` reads one photo) and the transferred face's; MediaPipe's
-//! blendshapes (`crate::judge`) read the picture and the transferred face, rendered frontally
-//! (`render`) and from its projected vertices (`mesh`). The face is solved without the neck
-//! (the expression alone), as a frontal render of `activations.csv` would show it.
+//! `experiments/photos.csv` onto the face by two methods, judged two ways. The methods:
+//! `network`, the cell's first unified network on the AUs facelab's observer reads in the
+//! picture (against the model's rest face, as `facelab transfer PHOTO` reads one photo); and
+//! `landmarks`, the landmark-space fit of the inversion table (Choe et al.'s eq. 10 with the
+//! box: the activations whose linear-basis face moves the 68 landmarks as the picture's moved
+//! from the model's rest face) followed by the nonlinear solve. The judges: facelab's observer
+//! reads the transferred face's AUs; MediaPipe's blendshapes (`crate::judge`) read the picture
+//! and the transferred face, rendered frontally (`render`) and from its projected vertices
+//! (`mesh`). The face is solved without the neck (the expression alone).
 //!
-//! Writes `photos.csv` into the run folder (per picture and reading: the AUs and blendshape
-//! groups in and out), `photos.md` into the tables folder, and `figures/photos/<picture>.png`:
-//! the picture, cut to the face, beside the transferred face. Stage key (`photos`): the
-//! pictures' and the list's content, and the keys of the first seed's unified network.
+//! Writes `photos.csv` into the run folder (per picture, method and reading: the AUs and
+//! blendshape groups in and out), `photos.md` into the tables folder, and
+//! `figures/photos/<picture>.png`: the picture, cut to the face, beside both transferred
+//! faces. Stage key (`photos`): the pictures' and the list's content, and the keys of the
+//! first seed's unified network and of the basis.
 
 use std::path::PathBuf;
 
@@ -21,16 +25,21 @@ use super::photos::{
 use super::table2::predict_activations;
 use crate::cache::{self, Entry};
 use crate::experiments::cell::{spec_calibration, CellRun, Experiment, Plan};
+use crate::experiments::inversion::Inverter;
 use crate::experiments::stage::{text, Artifact, Unit};
 use crate::judge::{groups, Judge, Reading, ABSENT, GROUPS, GROUP_LABELS, SHOWN};
 use crate::landmark::{Blendshapes, Landmarker};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{png_bytes, side_by_side};
 use crate::report::render::{render, RenderOptions};
+use crate::sim::basis::LinearBasis;
 use crate::sim::{solve_from_rest, SolveParams, Workspace};
 
-// 1: first version.
-const PHOTOS_VERSION: u32 = 1;
+// 1: first version. 2: the landmark-space method beside the network.
+const PHOTOS_VERSION: u32 = 2;
+
+/// The transfer methods, in table order.
+pub const METHODS: [&str; 2] = ["network", "landmarks"];
 
 /// The list of pictures, relative to the checkout.
 pub const PHOTOS_LIST: &str = "experiments/photos.csv";
@@ -107,8 +116,10 @@ fn content(pictures: &[Picture]) -> Result<String> {
     Ok(content)
 }
 
-fn unit(content: &str, train_key: &str) -> Unit {
-    Unit::new("photos", PHOTOS_VERSION, &content, &[train_key])
+fn unit(content: &str, train_key: &str, basis_key: Option<&str>) -> Unit {
+    let mut deps = vec![train_key];
+    deps.extend(basis_key);
+    Unit::new("photos", PHOTOS_VERSION, &content, &deps)
 }
 
 /// What the stage keeps: `photos.csv` and one figure per picture.
@@ -155,7 +166,7 @@ impl Experiment for Photos {
         let Some((_, train_key)) = k.unified().into_iter().next() else {
             bail!("the photo table needs a unified network (table1's training)");
         };
-        let u = unit(&content, train_key);
+        let u = unit(&content, train_key, k.basis.as_deref());
         plan.add("photos", u);
         Ok(())
     }
@@ -164,7 +175,7 @@ impl Experiment for Photos {
         let list = pictures()?;
         let content = content(&list)?;
         let spec = cx.spec;
-        let (n, k, model) = (cx.networks()?, cx.keys()?, cx.model()?);
+        let (n, k, model, basis) = (cx.networks()?, cx.keys()?, cx.model()?, cx.basis()?);
         let (_, train_key, mlp) = n
             .unified(&k)
             .into_iter()
@@ -175,41 +186,55 @@ impl Experiment for Photos {
             tolerance: spec.dataset.tolerance,
             ..SolveParams::default()
         };
-        let made = cx
-            .stages()
-            .get_or_compute(&unit(&content, &train_key), |_| {
-                let landmarker = Landmarker::new()?;
-                let judge = Judge::new()?;
-                let options = RenderOptions::default();
-                let mut ws = Workspace::new(&model)?;
-                let mut rows = Vec::new();
-                let mut figures = Vec::new();
-                for p in &list {
-                    let (frames, _) = read_frames(&p.path, InputKind::Image)?;
-                    let l = landmark_frames(
-                        &landmarker,
-                        &model,
-                        InputKind::Image,
-                        frames,
-                        0.0,
-                        &p.file,
-                    )?;
-                    let found = &l.found[0];
-                    let (Some(metric), Some(scores_in)) = (&found.metric, found.blendshapes) else {
-                        bail!("{}: no face found", p.file);
-                    };
-                    let observer =
-                        observer_for(&model, &l.found, PhotoNeutral::Model, calibration.clone())?;
-                    let aus_in = observer.observe(&landmarks(&metric.points))?.aus;
-                    let acts = predict_activations(mlp, None, &[aus_in])?;
-                    let (state, _) = solve_from_rest(&model, &acts[0], &mut ws, &params)
-                        .with_context(|| format!("{}: solving the transferred face", p.file))?;
+        let key = unit(&content, &train_key, k.basis.as_deref());
+        let made = cx.stages().get_or_compute(&key, |_| {
+            let built;
+            let basis = match basis.as_ref() {
+                Some(b) => b,
+                None => {
+                    built = LinearBasis::build(&model, &params)?;
+                    &built
+                }
+            };
+            let inverter = Inverter::new(&model, basis, &calibration)?;
+            let landmarker = Landmarker::new()?;
+            let judge = Judge::new()?;
+            let options = RenderOptions::default();
+            let mut ws = Workspace::new(&model)?;
+            let mut rows = Vec::new();
+            let mut figures = Vec::new();
+            for p in &list {
+                let (frames, _) = read_frames(&p.path, InputKind::Image)?;
+                let l =
+                    landmark_frames(&landmarker, &model, InputKind::Image, frames, 0.0, &p.file)?;
+                let found = &l.found[0];
+                let (Some(metric), Some(scores_in)) = (&found.metric, found.blendshapes) else {
+                    bail!("{}: no face found", p.file);
+                };
+                let observer =
+                    observer_for(&model, &l.found, PhotoNeutral::Model, calibration.clone())?;
+                let points = landmarks(&metric.points);
+                let aus_in = observer.observe(&points)?.aus;
+                let network = predict_activations(mlp, None, &[aus_in])?.remove(0);
+                let d: Vec<f64> = inverter
+                    .observer
+                    .displacements(&points)?
+                    .iter()
+                    .flatten()
+                    .copied()
+                    .collect();
+                let (fitted, _) = inverter.landmarks_pg(&d);
+                let mut faces = Vec::new();
+                for (method, a) in METHODS.iter().zip([network, fitted]) {
+                    let (state, _) = solve_from_rest(&model, &a, &mut ws, &params)
+                        .with_context(|| format!("{}: solving the {method} face", p.file))?;
                     let surface = state.surface(model.vertex_count());
                     let aus_out = observer.observe(&landmarks(surface))?.aus;
                     for reading in [Reading::Render, Reading::Mesh] {
                         let out = judge.face(&model, &state, &options, reading)?;
                         rows.push(Row {
                             file: p.file.clone(),
+                            method,
                             reading,
                             aus_in,
                             aus_out,
@@ -217,26 +242,25 @@ impl Experiment for Photos {
                             blend_out: out,
                         });
                     }
-                    let face = render(&model, &state, &options);
-                    let [x, y, w, h] = face_window(&l);
-                    let frame = &l.frames[0];
-                    let whole = image::RgbImage::from_raw(
-                        frame.width as u32,
-                        frame.height as u32,
-                        frame.data.clone(),
-                    )
-                    .context("an RGB frame's pixels")?;
-                    let picture = image::imageops::crop_imm(&whole, x, y, w, h).to_image();
-                    figures.push((
-                        format!("{}.png", p.stem()),
-                        png_bytes(&side_by_side(&picture, &face))?,
-                    ));
+                    faces.push(render(&model, &state, &options));
                 }
-                Ok(PhotoFiles {
-                    csv: csv(&rows),
-                    figures,
-                })
-            })?;
+                let [x, y, w, h] = face_window(&l);
+                let frame = &l.frames[0];
+                let whole = image::RgbImage::from_raw(
+                    frame.width as u32,
+                    frame.height as u32,
+                    frame.data.clone(),
+                )
+                .context("an RGB frame's pixels")?;
+                let picture = image::imageops::crop_imm(&whole, x, y, w, h).to_image();
+                let both = side_by_side(&side_by_side(&picture, &faces[0]), &faces[1]);
+                figures.push((format!("{}.png", p.stem()), png_bytes(&both)?));
+            }
+            Ok(PhotoFiles {
+                csv: csv(&rows),
+                figures,
+            })
+        })?;
         cx.output("photos.csv", made.csv.clone())?;
         let rows = from_csv(&made.csv)?;
         cx.table("photos.md", &markdown(&rows, &list, spec))?;
@@ -255,6 +279,7 @@ impl Experiment for Photos {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Row {
     pub file: String,
+    pub method: &'static str,
     pub reading: Reading,
     pub aus_in: [f64; AU_COUNT],
     pub aus_out: [f64; AU_COUNT],
@@ -263,7 +288,7 @@ pub struct Row {
 }
 
 fn csv(rows: &[Row]) -> String {
-    let mut text = String::from("file,reading,success_out");
+    let mut text = String::from("file,method,reading,success_out");
     for a in AU_NAMES {
         text.push_str(&format!(",{a}_in,{a}_out"));
     }
@@ -273,8 +298,9 @@ fn csv(rows: &[Row]) -> String {
     text.push('\n');
     for r in rows {
         text.push_str(&format!(
-            "{},{},{}",
+            "{},{},{},{}",
             r.file,
+            r.method,
             r.reading.name(),
             u8::from(r.blend_out.is_some())
         ));
@@ -300,7 +326,7 @@ fn from_csv(text: &str) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
     for (i, line) in text.lines().enumerate().skip(1) {
         let c: Vec<&str> = line.split(',').collect();
-        let want = 3 + 2 * AU_COUNT + 2 * GROUPS.len();
+        let want = 4 + 2 * AU_COUNT + 2 * GROUPS.len();
         if c.len() != want {
             bail!("photos.csv:{}: {} cells, expected {want}", i + 1, c.len());
         }
@@ -308,6 +334,11 @@ fn from_csv(text: &str) -> Result<Vec<Row>> {
             s.parse()
                 .with_context(|| format!("photos.csv:{}: `{s}` is not a number", i + 1))
         };
+        let method = METHODS
+            .iter()
+            .find(|m| **m == c[1])
+            .with_context(|| format!("photos.csv:{}: unknown method `{}`", i + 1, c[1]))?;
+        let c = &c[1..];
         let reading = match c[1] {
             "render" => Reading::Render,
             "mesh" => Reading::Mesh,
@@ -330,7 +361,8 @@ fn from_csv(text: &str) -> Result<Vec<Row>> {
             }
         }
         rows.push(Row {
-            file: c[0].to_string(),
+            file: line.split(',').next().unwrap_or_default().to_string(),
+            method,
             reading,
             aus_in,
             aus_out,
@@ -341,24 +373,30 @@ fn from_csv(text: &str) -> Result<Vec<Row>> {
     Ok(rows)
 }
 
-/// `photos.md`: per picture, what the judge sees in and out, and facelab's AUs.
+/// `photos.md`: per picture and method, what the judge sees in and out (render reading),
+/// facelab's AUs, and a summary per method.
 fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String {
     let mut md = format!(
-        "# Real pictures through the face (`{}`, its first unified network)\n\n\
-         Each committed real picture (`{PHOTOS_LIST}`) is read by facelab's observer against \
-         the model's rest face, transferred by the network onto the face (no neck: the \
-         expression alone) and read again. MediaPipe's blendshapes judge the picture and the \
-         transferred face, rendered frontally (`render`) and from its projected vertices \
-         (`mesh`), in groups of left and right averaged. A group is shown at >= {SHOWN} and \
-         absent below {ABSENT}; *kept* counts the shown groups the face reproduces within \
-         0.1, *added* the groups the face shows that the picture does not.\n\n",
+        "# Real pictures through the face (`{}`)\n\n\
+         Each committed real picture (`{PHOTOS_LIST}`) goes onto the face (no neck: the \
+         expression alone) by two methods: `network`, the spec's first unified network on the \
+         AUs facelab's observer reads in the picture against the model's rest face (what \
+         `facelab transfer PHOTO` does), and `landmarks`, the landmark-space fit of the \
+         inversion table (the activations whose linear-basis face moves the 68 landmarks as \
+         the picture's moved from the model's rest face, within the box) solved on the \
+         nonlinear face. MediaPipe's blendshapes judge the picture and the transferred face, \
+         rendered frontally, in groups of left and right averaged (the reading of the \
+         projected vertices, `mesh`, is in the run folder's `photos.csv`). A group is shown at \
+         >= {SHOWN} and absent below {ABSENT}; *kept* counts the shown groups the face \
+         reproduces within 0.1, *added* the groups the face shows that the picture does not. \
+         The last two columns are facelab's own AUs, in and out.\n\n",
         spec.experiment
     );
     md.push_str(
-        "| picture | shows | reading | groups shown in -> out | kept | added (out) | mean abs diff (shown) | AUs <= 0.5 in out > 1.0 | AUs >= 2 in below 70% out |\n\
+        "| picture | shows | method | groups shown in -> out | kept | added (out) | mean abs diff (shown) | AUs <= 0.5 in, out > 1.0 | AUs >= 2 in, out below 70% |\n\
          |---|---|---|---|---|---|---|---|---|\n",
     );
-    for r in rows {
+    for r in rows.iter().filter(|r| r.reading == Reading::Render) {
         let p = list.iter().find(|p| p.file == r.file);
         let gin = &r.blend_in[..GROUPS.len()];
         let (shown, kept, added, diff) = match &r.blend_out {
@@ -427,32 +465,45 @@ fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String 
             "| {} | {} | {} | {shown} | {kept} | {added} | {diff} | {} | {} |\n",
             p.map_or(r.file.as_str(), |p| p.stem()),
             p.map_or("", |p| p.shows.as_str()),
-            r.reading.name(),
+            r.method,
             or_none(low),
             or_none(strong),
         ));
     }
-    let render: Vec<&Row> = rows
-        .iter()
-        .filter(|r| r.reading == Reading::Render)
-        .collect();
-    let (mut shown, mut kept, mut added) = (0, 0, 0);
-    for r in &render {
-        if let Some(out) = &r.blend_out {
-            for g in 0..GROUPS.len() {
-                let (a, b) = (r.blend_in[g], out[g]);
-                if a >= SHOWN {
-                    shown += 1;
-                    kept += usize::from((a - b).abs() <= 0.1);
+    md.push('\n');
+    for method in METHODS {
+        let mine: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.reading == Reading::Render && r.method == method)
+            .collect();
+        let (mut shown, mut kept, mut added) = (0, 0, 0);
+        let (mut low, mut strong, mut strong_kept) = (0, 0, 0);
+        for r in &mine {
+            if let Some(out) = &r.blend_out {
+                for g in 0..GROUPS.len() {
+                    let (a, b) = (r.blend_in[g], out[g]);
+                    if a >= SHOWN {
+                        shown += 1;
+                        kept += usize::from((a - b).abs() <= 0.1);
+                    }
+                    added += usize::from(a < ABSENT && b >= SHOWN);
                 }
-                added += usize::from(a < ABSENT && b >= SHOWN);
+            }
+            for k in 0..AU_COUNT {
+                low += usize::from(r.aus_in[k] <= 0.5 && r.aus_out[k] > 1.0);
+                if r.aus_in[k] >= 2.0 {
+                    strong += 1;
+                    strong_kept += usize::from(r.aus_out[k] >= 0.7 * r.aus_in[k]);
+                }
             }
         }
+        md.push_str(&format!(
+            "- `{method}`, over the {} pictures: of the {shown} blendshape groups the pictures \
+             show, {kept} kept within 0.1; {added} groups shown that the pictures do not. \
+             facelab's AUs: {low} at or below 0.5 in come out above 1.0; {strong_kept} of the \
+             {strong} at or above 2 in come out at 70% or more.\n",
+            mine.len()
+        ));
     }
-    md.push_str(&format!(
-        "\nOver the {} pictures (render reading): {kept} of the {shown} groups the pictures \
-         show are kept within 0.1; the faces show {added} groups the pictures do not.\n",
-        render.len()
-    ));
     md
 }

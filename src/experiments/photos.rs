@@ -118,7 +118,7 @@ pub fn read_frames(path: &Path, kind: InputKind) -> Result<(Vec<RgbFrame>, f64)>
             let frame = decode_rgb(&bytes).map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?;
             Ok((vec![frame], 0.0))
         }
-        InputKind::Gif => read_gif(path),
+        InputKind::Gif => Ok(crate::io::photo::read_gif(path)?),
         InputKind::Folder => read_folder(path),
         InputKind::Video => read_video(path),
         InputKind::OpenFace => bail!(
@@ -126,36 +126,6 @@ pub fn read_frames(path: &Path, kind: InputKind) -> Result<(Vec<RgbFrame>, f64)>
             path.display()
         ),
     }
-}
-
-fn read_gif(path: &Path) -> Result<(Vec<RgbFrame>, f64)> {
-    use image::AnimationDecoder;
-    let file =
-        std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let decoder = image::codecs::gif::GifDecoder::new(std::io::BufReader::new(file))
-        .with_context(|| format!("{}: not a readable GIF", path.display()))?;
-    let frames = decoder
-        .into_frames()
-        .collect_frames()
-        .with_context(|| format!("{}: cannot decode the GIF's frames", path.display()))?;
-    if frames.is_empty() {
-        bail!("{}: a GIF with no frames", path.display());
-    }
-    let (num, den) = frames[0].delay().numer_denom_ms();
-    let ms = if num == 0 {
-        100.0
-    } else {
-        num as f64 / den as f64
-    };
-    let out = frames
-        .into_iter()
-        .map(|f| {
-            let rgb = image::DynamicImage::ImageRgba8(f.into_buffer()).to_rgb8();
-            let (w, h) = rgb.dimensions();
-            RgbFrame::new(w as usize, h as usize, rgb.into_raw())
-        })
-        .collect();
-    Ok((out, 1000.0 / ms))
 }
 
 /// The images of a folder in name order (PNG, JPEG, GIF by content; other files ignored).
@@ -509,6 +479,9 @@ pub struct LandmarkOutput {
     pub pictures: Vec<image::RgbImage>,
     /// MediaPipe's blendshapes per input frame (`None`: no face).
     pub blendshapes: Vec<Option<Blendshapes>>,
+    /// The 68 landmarks' displacements from the neutral face per input frame (model frame,
+    /// IOD units, flattened x, y, z), what the landmark-space fit matches.
+    pub displacements: Vec<Option<Vec<f64>>>,
 }
 
 /// Photo/video -> landmarks -> `DIR/openface.csv` (OpenFace layout, our AUs under
@@ -567,6 +540,15 @@ pub fn landmark_files(
     let observer = observer_for(model, &l.found, neutral, calibration)
         .with_context(|| format!("{name}: the neutral face"))?;
     let rows = openface_rows(&l, &observer).with_context(|| name.clone())?;
+    let displacements = l
+        .found
+        .iter()
+        .map(|f| {
+            let Some(m) = &f.metric else { return Ok(None) };
+            let d = observer.displacements(&model_landmarks(m))?;
+            Ok(Some(d.iter().flatten().copied().collect()))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let pictures: Vec<image::RgbImage> = l
         .frames
         .iter()
@@ -635,6 +617,7 @@ pub fn landmark_files(
         warnings: l.warnings,
         pictures: faces_only,
         blendshapes,
+        displacements,
     })
 }
 

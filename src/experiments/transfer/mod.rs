@@ -11,11 +11,19 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use image::RgbImage;
 
+mod neck;
+
+pub(crate) use neck::follow;
+use neck::{drive_neck, neck_weights, no_neck_controller};
+
+use rayon::prelude::*;
+
 use super::face::FaceSource;
 use super::fidelity::{Fidelity, JudgeFrames};
+use super::inversion::Inverter;
 use super::observe::model_observer;
 use super::table2::{au_mse, predict_activations};
-use crate::headneck::{face_motion, posed_face, Learned};
+use crate::headneck::{face_motion, posed_face};
 use crate::io::atomic::write_atomic;
 use crate::io::openface::{parse_openface, read_openface, write_openface, FaceRow};
 use crate::io::rows::{self, num, CsvRow};
@@ -25,8 +33,8 @@ use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{gif_bytes, side_by_side};
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
+use crate::sim::basis::LinearBasis;
 use crate::sim::controls::control_names;
-use crate::sim::neck::{simulate, BodyState, HeadPose, PoseSequence};
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 
 #[derive(Clone, Debug)]
@@ -53,6 +61,32 @@ pub struct TransferOptions {
     pub input_blendshapes: Option<Vec<Option<Blendshapes>>>,
     /// Read the transferred face with MediaPipe's blendshapes (`fidelity.csv`, `fidelity.md`).
     pub judge: bool,
+    /// Activations per input frame (indexed like `pictures`) found without the network (the
+    /// landmark-space fit); `None`: the network's, from the AUs.
+    pub fitted: Option<Vec<Option<Activations>>>,
+}
+
+/// How a picture's expression becomes activations.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TransferMethod {
+    /// The run's unified network on the AUs facelab's observer reads (Zeng et al.'s path).
+    Network,
+    /// The landmark-space fit (Choe et al.'s eq. 10 with the box, through the linear basis):
+    /// the activations that move the model's 68 landmarks as the person's moved from the
+    /// neutral face. The default for pictures: on the committed real pictures it keeps more
+    /// of what MediaPipe sees and adds nothing it does not (`paper-tables/photos.md`).
+    #[default]
+    Landmarks,
+}
+
+impl TransferMethod {
+    pub fn parse(s: &str) -> Option<TransferMethod> {
+        match s {
+            "network" => Some(TransferMethod::Network),
+            "landmarks" => Some(TransferMethod::Landmarks),
+            _ => None,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -181,7 +215,19 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
             Some(super::table2::range_map(kind, &reference, &target))
         }
     };
-    let acts = predict_activations(&mlp, map.as_ref(), &reference)?;
+    let acts = match &opts.fitted {
+        Some(fitted) => file
+            .rows
+            .iter()
+            .map(|r| {
+                usize::try_from(r.frame - 1)
+                    .ok()
+                    .and_then(|k| fitted.get(k).cloned().flatten())
+                    .with_context(|| format!("frame {}: no fitted activations", r.frame))
+            })
+            .collect::<Result<Vec<_>>>()?,
+        None => predict_activations(&mlp, map.as_ref(), &reference)?,
+    };
 
     let source = FaceSource::of_spec(&spec);
     let model = source.model()?;
@@ -462,191 +508,6 @@ pub fn solve_clip_tolerant<S: Clone>(
     Ok(failures)
 }
 
-/// The neck's response to a file's head pose, per frame.
-struct HeadTrack {
-    /// The file's pose (clamped into the neck's range).
-    target: Vec<HeadPose>,
-    pose: Vec<HeadPose>,
-    offset: Vec<crate::sim::geom::V3>,
-}
-
-/// Drives the neck with the rows' `pose_Rx, pose_Ry, pose_Rz` (frames `dt` apart) under a
-/// run's learned voluntary controller (`voluntary.safetensors` of `opts.neck`, else of the
-/// face's run, whose spec is `spec`) from the upright rest posture.
-fn drive_neck(
-    opts: &TransferOptions,
-    spec: &crate::spec::Spec,
-    rows: &[FaceRow],
-    dt: f64,
-) -> Result<HeadTrack> {
-    let (weights, neck) = neck_run(opts, spec)?;
-    let bytes = std::fs::read(&weights).map_err(|_| {
-        no_neck_controller(
-            &weights,
-            "the input has head pose (pose_Rx, pose_Ry, pose_Rz)",
-        )
-    })?;
-    let mlp = Mlp::from_safetensors(&bytes).with_context(|| format!("{}", weights.display()))?;
-    let targets = PoseSequence {
-        fps: 1.0 / dt,
-        poses: rows
-            .iter()
-            .map(|r| {
-                let p = r.pose.expect("checked by the caller");
-                HeadPose {
-                    pitch: p[3],
-                    yaw: p[4],
-                    roll: p[5],
-                }
-            })
-            .collect(),
-    };
-    // The reader refuses NaN cells, naming the line; clamped frames are named as the file does.
-    let (targets, clamped) = targets
-        .checked(&neck)
-        .with_context(|| format!("{}: head pose", opts.openface.display()))?;
-    for (i, w) in clamped.iter().take(5) {
-        eprintln!(
-            "warning: {}: frame {}: {w}",
-            opts.openface.display(),
-            rows[*i].frame
-        );
-    }
-    if clamped.len() > 5 {
-        eprintln!(
-            "warning: {}: {} more frames clamped",
-            opts.openface.display(),
-            clamped.len() - 5
-        );
-    }
-    // Sampled at 400 Hz; each frame takes the nearest sample.
-    let (pose, offset) = follow(&neck, &mlp, &targets, false)
-        .with_context(|| format!("{}: driving the neck", opts.openface.display()))?;
-    Ok(HeadTrack {
-        target: targets.poses.clone(),
-        pose,
-        offset,
-    })
-}
-
-/// The head under a learned voluntary controller following `targets` (frames `1 / fps`
-/// apart): one pose is a still, held until the head settles ([`hold_still`]); more are a clip,
-/// simulated from the upright rest posture or, with `settled_start`, from the posture that
-/// holds the clip's first pose (a clip cut from a longer video). Returns each frame's pose
-/// and skull offset, sampled at 400 Hz, each frame the nearest sample.
-pub(crate) fn follow(
-    neck: &crate::sim::neck::Neck,
-    mlp: &Mlp,
-    targets: &PoseSequence,
-    settled_start: bool,
-) -> Result<(Vec<HeadPose>, Vec<crate::sim::geom::V3>)> {
-    let every = 10;
-    let first = PoseSequence {
-        fps: targets.fps,
-        poses: targets.poses.iter().take(1).copied().collect(),
-    };
-    if targets.poses.len() == 1 {
-        let (pose, offset, _) = hold_still(neck, mlp, &first, every)?;
-        return Ok((vec![pose], vec![offset]));
-    }
-    let start = if settled_start {
-        hold_still(neck, mlp, &first, every)?.2
-    } else {
-        BodyState::rest()
-    };
-    let dt = 1.0 / targets.fps;
-    let frames = targets.poses.len();
-    let run = simulate(
-        neck,
-        &mut Learned { mlp },
-        targets,
-        start,
-        frames as f64 * dt,
-        every,
-    )?;
-    let rate = neck.params.simulation_rate / every as f64;
-    let pick = |i: usize| ((i as f64 * dt * rate).round() as usize).min(run.time.len() - 1);
-    Ok((
-        (0..frames).map(|i| run.pose[pick(i)]).collect(),
-        (0..frames).map(|i| run.skull_offset[pick(i)]).collect(),
-    ))
-}
-
-/// How long a still is held per step while the head settles, and when it has settled: the
-/// head turns less than [`STILL_SETTLED_DEG`] over one step. At most [`STILL_MAX_STEPS`] steps.
-const STILL_STEP_S: f64 = 0.5;
-const STILL_SETTLED_DEG: f64 = 0.05;
-const STILL_MAX_STEPS: usize = 12;
-
-/// A photo's head pose: the neck holds the one target from the upright rest posture until the
-/// head settles (a video frame lasts 1/30 s, far too short to reach a still's pose). Returns
-/// the settled pose, skull offset and body state; an error if the head still moves after 6 s.
-fn hold_still(
-    neck: &crate::sim::neck::Neck,
-    mlp: &Mlp,
-    target: &PoseSequence,
-    every: usize,
-) -> Result<(HeadPose, crate::sim::geom::V3, BodyState)> {
-    let mut state = BodyState::rest();
-    let mut last: Option<HeadPose> = None;
-    for _ in 0..STILL_MAX_STEPS {
-        let run = simulate(
-            neck,
-            &mut Learned { mlp },
-            target,
-            state,
-            STILL_STEP_S,
-            every,
-        )?;
-        let (pose, offset) = (
-            *run.pose.last().context("an empty neck run")?,
-            *run.skull_offset.last().context("an empty neck run")?,
-        );
-        if last.is_some_and(|p| p.error_degrees(pose) < STILL_SETTLED_DEG) {
-            return Ok((pose, offset, run.final_state));
-        }
-        last = Some(pose);
-        state = run.final_state;
-    }
-    bail!(
-        "the head did not settle on the still's pose: it still turns {STILL_SETTLED_DEG} deg or \
-         more per {STILL_STEP_S} s after {} s",
-        STILL_STEP_S * STILL_MAX_STEPS as f64
-    )
-}
-
-/// The voluntary controller's weights: `opts.neck`'s run, else the face's.
-fn neck_weights(opts: &TransferOptions) -> PathBuf {
-    opts.neck
-        .as_ref()
-        .unwrap_or(&opts.model)
-        .join("voluntary.safetensors")
-}
-
-/// The voluntary controller's weights and the neck it was trained on: `opts.neck`'s run, else
-/// the face's (whose spec is `spec`).
-fn neck_run(
-    opts: &TransferOptions,
-    spec: &crate::spec::Spec,
-) -> Result<(PathBuf, crate::sim::neck::Neck)> {
-    let neck = match &opts.neck {
-        Some(dir) => run_spec(dir)?.headpose.neck(),
-        None => spec.headpose.neck(),
-    };
-    Ok((neck_weights(opts), neck))
-}
-
-/// The error for a head pose to follow without a voluntary controller at `weights`; `why` says
-/// where the pose comes from.
-fn no_neck_controller(weights: &Path, why: &str) -> anyhow::Error {
-    anyhow::anyhow!(
-        "{}: {why}, but the run has no voluntary neck controller (pass --neck with a run of a \
-         spec whose tables list \"headpose\", e.g. results/headpose/latest, or pass \
-         --ignore-pose)",
-        weights.display()
-    )
-}
-
 /// `facelab transfer PATH`: an OpenFace CSV goes straight to [`transfer_openface`]
 /// (normalization `normalize`, default min-max); a photo, folder, GIF or video first goes
 /// through the built-in landmarker ([`super::photos::landmark_input`]), which writes
@@ -658,9 +519,17 @@ pub fn transfer_path(
     opts: &TransferOptions,
     normalize: Option<Normalization>,
     neutral: Option<super::photos::PhotoNeutral>,
+    method: Option<TransferMethod>,
 ) -> Result<(TransferSummary, Option<super::photos::LandmarkOutput>)> {
     use super::photos::{input_kind, landmark_files, write_files, InputKind};
     if input_kind(input)? == InputKind::OpenFace {
+        if method == Some(TransferMethod::Landmarks) {
+            bail!(
+                "{}: --method landmarks fits a picture's landmarks; an OpenFace file goes \
+                 through the network (--method network)",
+                input.display()
+            );
+        }
         let opts = TransferOptions {
             openface: input.to_path_buf(),
             normalize: normalize.unwrap_or(Normalization::MinMax),
@@ -681,8 +550,28 @@ pub fn transfer_path(
     }
     let model = FaceSource::of_spec(&spec).model()?;
     let calibration = super::cell::spec_calibration(&spec)?;
-    let mut landmarked = landmark_files(input, &opts.out, &model, calibration, neutral)?;
+    let mut landmarked = landmark_files(input, &opts.out, &model, calibration.clone(), neutral)?;
+    let fitted = match method.unwrap_or_default() {
+        TransferMethod::Network => None,
+        TransferMethod::Landmarks => {
+            let params = SolveParams {
+                tolerance: spec.dataset.tolerance,
+                ..SolveParams::default()
+            };
+            let basis = LinearBasis::build(&model, &params)
+                .context("the linear basis for the landmark-space fit")?;
+            let inverter = Inverter::new(&model, &basis, &calibration)?;
+            Some(
+                landmarked
+                    .displacements
+                    .par_iter()
+                    .map(|d| d.as_ref().map(|d| inverter.landmarks_pg(d).0))
+                    .collect(),
+            )
+        }
+    };
     let opts = TransferOptions {
+        fitted,
         openface: landmarked.openface.clone(),
         openface_bytes: Some(landmarked.files[0].1.clone()),
         normalize: normalize.unwrap_or(Normalization::None),
