@@ -506,8 +506,10 @@ fn conv(
 }
 
 /// A depthwise convolution (one filter per channel) plus its bias, by direct loops over the
-/// padded input. Broadcast products of shifted views, or candle's grouped `conv2d` (one
-/// convolution per channel), cost several times more on these thin, wide layers.
+/// input with TFLite's padding applied implicitly (taps that fall outside add nothing).
+/// Broadcast products of shifted views, or candle's grouped `conv2d` (one convolution per
+/// channel), cost several times more on these thin, wide layers, and padding the input first
+/// costs two copies of it.
 fn depthwise(
     x: &Tensor,
     w: &Tensor,
@@ -516,47 +518,107 @@ fn depthwise(
     stride: [usize; 2],
 ) -> candle_core::Result<Tensor> {
     let (kh, kw) = (w.dim(2)?, w.dim(3)?);
-    let (xp, [n, c, hp, wp], [oh, ow]) = padded(x, padding, [kh, kw], stride)?;
-    if w.dims() != [c, 1, kh, kw] || bias.elem_count() != c || hp < kh || wp < kw {
+    let (n, c, h, wd) = x.dims4()?;
+    let (pad, [oh, ow]) = implicit_padding([h, wd], padding, [kh, kw], stride);
+    if w.dims() != [c, 1, kh, kw] || bias.elem_count() != c || oh == 0 || ow == 0 {
         candle_core::bail!(
-            "depthwise kernel {:?} and bias of {} do not fit an input of {c} channels, {hp}x{wp}",
+            "depthwise kernel {:?} and bias of {} do not fit an input of {c} channels, {h}x{wd}",
             w.dims(),
             bias.elem_count()
         );
     }
-    let (xs, ws, bs) = (values(&xp)?, values(w)?, values(bias)?);
+    let (ws, bs) = (values(w)?, values(bias)?);
     // Tap by tap in row order, then the bias: each output's sum in the order of the
-    // broadcast formulation, bit for bit (-0.0 is the exact identity of f32 addition). The
-    // taps are the outer loop so that the inner one runs along an output row, which the
-    // compiler vectorizes at stride 1.
+    // broadcast formulation (-0.0 is the exact identity of f32 addition). The taps are the
+    // outer loop so that the inner one runs along an output row, which the compiler
+    // vectorizes at stride 1.
     let mut out = vec![-0.0f32; n * c * oh * ow];
-    for ((plane, o), ch) in xs
-        .chunks_exact(hp * wp)
-        .zip(out.chunks_exact_mut(oh * ow))
-        .zip((0..c).cycle())
-    {
-        let taps = &ws[ch * kh * kw..(ch + 1) * kh * kw];
-        for (t, &tap) in taps.iter().enumerate() {
-            let (i, j) = (t / kw, t % kw);
-            for (oy, o_row) in o.chunks_exact_mut(ow).enumerate() {
-                let row = &plane[(oy * stride[0] + i) * wp + j..];
-                if stride[1] == 1 {
-                    for (acc, a) in o_row.iter_mut().zip(&row[..ow]) {
-                        *acc += a * tap;
+    with_slice(x, |xs| {
+        for ((plane, o), ch) in xs
+            .chunks_exact(h * wd)
+            .zip(out.chunks_exact_mut(oh * ow))
+            .zip((0..c).cycle())
+        {
+            let taps = &ws[ch * kh * kw..(ch + 1) * kh * kw];
+            for (t, &tap) in taps.iter().enumerate() {
+                let (i, j) = (t / kw, t % kw);
+                // Output columns whose input column `ox * s + j - pad_left` is inside.
+                let first = pad[1].saturating_sub(j).div_ceil(stride[1]);
+                let last = ((wd + pad[1]).saturating_sub(j))
+                    .div_ceil(stride[1])
+                    .min(ow);
+                if first >= last {
+                    continue;
+                }
+                for (oy, o_row) in o.chunks_exact_mut(ow).enumerate() {
+                    let Some(iy) = (oy * stride[0] + i).checked_sub(pad[0]) else {
+                        continue;
+                    };
+                    if iy >= h {
+                        continue;
                     }
-                } else {
-                    for (acc, a) in o_row.iter_mut().zip(row.iter().step_by(stride[1])) {
-                        *acc += a * tap;
+                    let row = &plane[iy * wd..(iy + 1) * wd];
+                    let x0 = first * stride[1] + j - pad[1];
+                    if stride[1] == 1 {
+                        for (acc, a) in o_row[first..last].iter_mut().zip(&row[x0..]) {
+                            *acc += a * tap;
+                        }
+                    } else {
+                        for (acc, a) in o_row[first..last]
+                            .iter_mut()
+                            .zip(row[x0..].iter().step_by(stride[1]))
+                        {
+                            *acc += a * tap;
+                        }
                     }
                 }
             }
+            let b = bs[ch];
+            for acc in o.iter_mut() {
+                *acc += b;
+            }
         }
-        let b = bs[ch];
-        for acc in o.iter_mut() {
-            *acc += b;
+    })?;
+    Tensor::from_vec(out, (n, c, oh, ow), x.device())
+}
+
+/// TFLite's padding as offsets, without padding the input: the top and left padding and
+/// the output's height and width (SAME pads `max((out - 1) s + k - in, 0)` with the odd
+/// pixel after; VALID pads nothing).
+fn implicit_padding(
+    size: [usize; 2],
+    padding: Padding,
+    kernel: [usize; 2],
+    stride: [usize; 2],
+) -> ([usize; 2], [usize; 2]) {
+    let mut pad = [0; 2];
+    let mut out = [0; 2];
+    for a in 0..2 {
+        let (n, k, s) = (size[a], kernel[a], stride[a]);
+        match padding {
+            Padding::Same => {
+                out[a] = n.div_ceil(s);
+                pad[a] = ((out[a] - 1) * s + k).saturating_sub(n) / 2;
+            }
+            Padding::Valid => out[a] = n.checked_sub(k).map_or(0, |d| d / s + 1),
         }
     }
-    Tensor::from_vec(out, (n, c, oh, ow), x.device())
+    (pad, out)
+}
+
+/// Runs `f` on a tensor's f32 values in row-major order, borrowed from its storage where it
+/// is contiguous on the CPU (copied otherwise).
+fn with_slice<R>(t: &Tensor, f: impl FnOnce(&[f32]) -> R) -> candle_core::Result<R> {
+    {
+        let (storage, layout) = t.storage_and_layout();
+        if let (candle_core::Storage::Cpu(cpu), Some((start, end))) =
+            (&*storage, layout.contiguous_offsets())
+        {
+            let data = cpu.as_slice::<f32>()?;
+            return Ok(f(&data[start..end]));
+        }
+    }
+    Ok(f(&values(t)?))
 }
 
 /// PReLU with one slope per channel, in one pass: `x` where `x >= 0`, else `alpha x`; the
@@ -567,14 +629,13 @@ fn prelu(x: &Tensor, alpha: &Tensor) -> candle_core::Result<Tensor> {
     if alpha.len() != c {
         candle_core::bail!("PReLU has {} slopes for {c} channels", alpha.len());
     }
-    let mut xs = values(x)?;
-    for (plane, &a) in xs.chunks_exact_mut(h * w).zip(alpha.iter().cycle()) {
-        for v in plane.iter_mut() {
-            let m = if *v < 0.0 { a } else { 1.0 };
-            *v *= m;
+    let mut out = Vec::with_capacity(n * c * h * w);
+    with_slice(x, |xs| {
+        for (plane, &a) in xs.chunks_exact(h * w).zip(alpha.iter().cycle()) {
+            out.extend(plane.iter().map(|&v| v * if v < 0.0 { a } else { 1.0 }));
         }
-    }
-    Tensor::from_vec(xs, (n, c, h, w), x.device())
+    })?;
+    Tensor::from_vec(out, (n, c, h, w), x.device())
 }
 
 fn activate(y: Tensor, activation: Activation) -> candle_core::Result<Tensor> {
