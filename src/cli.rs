@@ -276,9 +276,10 @@ pub enum Command {
         /// fidelity.csv, fidelity.md)
         #[arg(long)]
         no_judge: bool,
-        /// How a picture's expression becomes activations: `landmarks`, the landmark-space
-        /// fit to the person's landmark motion (the default for pictures), or `network`, the
-        /// run's unified network on the AUs (the only method for OpenFace files)
+        /// How the expression becomes activations: `landmarks`, the landmark-space fit to the
+        /// person's landmark motion from their neutral face (the default for pictures; an
+        /// OpenFace file needs its 3D landmarks), or `network`, the run's unified network on
+        /// the AUs (the default for OpenFace files)
         #[arg(long, value_parser = ["landmarks", "network"])]
         method: Option<String>,
         /// Output file or folder

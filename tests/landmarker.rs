@@ -588,8 +588,7 @@ fn the_render_source_reads_pictures_of_the_face_the_same_on_any_thread_count() {
 /// A neutral face with closed lips (luispedro.jpg): through the landmark-space fit, the
 /// default for pictures, no AU the picture does not show comes out above 1.0; through the
 /// paper's network on the AUs the same picture comes out with its mouth open (AU25 and AU26
-/// 1.7 from 0.1 and below), the failure the fit was brought in for. An OpenFace file cannot
-/// take the fit.
+/// 1.7 from 0.1 and below), the failure the fit was brought in for.
 #[test]
 fn a_picture_transfers_by_its_landmarks_without_inventing_a_jaw() {
     let dir = crate::temp("landmarker", "method");
@@ -640,14 +639,32 @@ fn a_picture_transfers_by_its_landmarks_without_inventing_a_jaw() {
         "{input:?} -> {network:?}"
     );
 
-    let csv = root().join("assets/openface/py-feat/OpenFace_Test.csv");
+    // An OpenFace file takes the fit only with its 3D landmarks; without them the error
+    // says how to get them, and nothing is written.
+    let names = facelab::observe::AU_NAMES;
+    let header: Vec<String> = names.iter().map(|a| format!("{a}_r")).collect();
+    let csv = dir.join("aus_only.csv");
+    std::fs::write(
+        &csv,
+        format!(
+            "frame,face_id,timestamp,confidence,success,{}\n1,0,0.0,0.98,1,{}\n",
+            header.join(","),
+            vec!["0.5"; names.len()].join(",")
+        ),
+    )
+    .unwrap();
+    let out = dir.join("csv");
     let (ok, _, err) = facelab(&[
         "transfer",
         csv.to_str().unwrap(),
         "--method",
         "landmarks",
         "--out",
-        dir.join("csv").to_str().unwrap(),
+        out.to_str().unwrap(),
     ]);
-    assert!(!ok && err.contains("--method network"), "{err}");
+    assert!(
+        !ok && err.contains("3D landmarks") && err.contains("-3Dfp"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }

@@ -135,7 +135,7 @@ pub(crate) fn median(values: &mut [f64]) -> f64 {
 }
 
 /// An OpenFace file our observer can read: with 3D landmarks and at least one used row.
-fn read_observable(input: &Path) -> Result<OpenFaceFile> {
+pub(crate) fn read_observable(input: &Path) -> Result<OpenFaceFile> {
     let file = read_openface(input)?;
     if !file.layout.landmarks_3d {
         bail!(
@@ -155,7 +155,7 @@ fn read_observable(input: &Path) -> Result<OpenFaceFile> {
 }
 
 /// The used rows' 3D landmarks in our frame (the file's layout has them).
-fn camera_faces(file: &OpenFaceFile) -> Vec<[V3; LANDMARK_COUNT]> {
+pub(crate) fn camera_faces(file: &OpenFaceFile) -> Vec<[V3; LANDMARK_COUNT]> {
     file.rows
         .iter()
         .map(|r| from_camera(r.landmarks_3d.as_ref().expect("3D layout checked")))

@@ -74,7 +74,9 @@ pub enum TransferMethod {
     /// The landmark-space fit (Choe et al.'s eq. 10 with the box, through the linear basis):
     /// the activations that move the model's 68 landmarks as the person's moved from the
     /// neutral face. The default for pictures: on the committed real pictures it keeps more
-    /// of what MediaPipe sees and adds nothing it does not (`paper-tables/photos.md`).
+    /// of what MediaPipe sees and adds nothing it does not (`paper-tables/photos.md`). An
+    /// OpenFace file takes it with its 3D landmarks (neutral: the per-landmark median of its
+    /// rows); there it is not better than the network on the whole, so it is not the default.
     #[default]
     Landmarks,
 }
@@ -524,11 +526,12 @@ pub fn transfer_path(
     use super::photos::{input_kind, landmark_files, write_files, InputKind};
     if input_kind(input)? == InputKind::OpenFace {
         if method == Some(TransferMethod::Landmarks) {
-            bail!(
-                "{}: --method landmarks fits a picture's landmarks; an OpenFace file goes \
-                 through the network (--method network)",
-                input.display()
-            );
+            let opts = TransferOptions {
+                openface: input.to_path_buf(),
+                fitted: Some(openface_fit(input, &opts.model)?),
+                ..opts.clone()
+            };
+            return Ok((transfer_openface(&opts)?, None));
         }
         let opts = TransferOptions {
             openface: input.to_path_buf(),
@@ -585,6 +588,48 @@ pub fn transfer_path(
     written.append(&mut summary.written);
     summary.written = written;
     Ok((summary, Some(landmarked)))
+}
+
+/// The landmark-space fit of every used row of an OpenFace file with 3D landmarks, against
+/// the file's own neutral face (the per-landmark median of its rows), indexed by `frame - 1`.
+fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Activations>>> {
+    use super::observe::{camera_faces, median_face, read_observable};
+    let file = read_observable(input).context("--method landmarks fits the file's 3D landmarks")?;
+    let spec = run_spec(run)?;
+    let model = FaceSource::of_spec(&spec).model()?;
+    let calibration = super::cell::spec_calibration(&spec)?;
+    let faces = camera_faces(&file);
+    let observer = crate::observe::Observer::new(&median_face(&faces), calibration.clone())
+        .with_context(|| format!("{}: the neutral face", input.display()))?;
+    let params = SolveParams {
+        tolerance: spec.dataset.tolerance,
+        ..SolveParams::default()
+    };
+    let basis = LinearBasis::build(&model, &params)
+        .context("the linear basis for the landmark-space fit")?;
+    let inverter = Inverter::new(&model, &basis, &calibration)?;
+    let frames = file.rows.iter().map(|r| r.frame).max().unwrap_or(0).max(0) as usize;
+    let mut fitted = vec![None; frames];
+    let found: Vec<(usize, Activations)> = file
+        .rows
+        .par_iter()
+        .zip(&faces)
+        .filter(|(r, _)| r.frame >= 1)
+        .map(|(r, face)| {
+            let d: Vec<f64> = observer
+                .displacements(face)
+                .with_context(|| format!("{}:{}", input.display(), r.line))?
+                .iter()
+                .flatten()
+                .copied()
+                .collect();
+            Ok((r.frame as usize - 1, inverter.landmarks_pg(&d).0))
+        })
+        .collect::<Result<_>>()?;
+    for (k, a) in found {
+        fitted[k] = Some(a);
+    }
+    Ok(fitted)
 }
 
 /// A line of a transfer's `mse.csv`: an AU (or `mean`) and its MSE against the input.
