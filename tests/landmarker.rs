@@ -668,3 +668,50 @@ fn a_picture_transfers_by_its_landmarks_without_inventing_a_jaw() {
     );
     assert!(!out.exists());
 }
+
+/// The real-photo table through the smoke spec's tiny network: every committed picture by
+/// both methods and both readings, a figure per picture, the same bytes from the cache; and
+/// the landmark fit, which neither the network nor the AU calibration touches, reads the same
+/// blendshape groups as the committed table (`paper-tables/photos.md`, the paper's spec).
+#[test]
+fn the_photo_table_covers_every_picture_and_its_landmark_fit_matches_the_committed_table() {
+    let results = crate::temp("landmarker", "photo-table").join("results");
+    let run = || {
+        let (ok, _, err) = facelab(&[
+            "run",
+            root().join("experiments/smoke.toml").to_str().unwrap(),
+            "--results",
+            results.to_str().unwrap(),
+            "--set",
+            "tables=[\"photos\"]",
+        ]);
+        assert!(ok, "{err}");
+        std::fs::read_to_string(results.join("smoke/latest/photos.csv")).unwrap()
+    };
+    let csv = run();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(rows.len(), 10 * 2 * 2, "10 pictures, 2 methods, 2 readings");
+    for method in ["network", "landmarks"] {
+        let n = rows
+            .iter()
+            .filter(|r| r.split(',').nth(1) == Some(method))
+            .count();
+        assert_eq!(n, 20, "{method}");
+    }
+    let figures = results.join("smoke/latest/figures/smoke_photos");
+    assert_eq!(std::fs::read_dir(&figures).unwrap().count(), 10);
+    assert_eq!(run(), csv, "the same bytes from the cache");
+
+    let groups = |md: &str| -> String {
+        let line = md
+            .lines()
+            .find(|l| l.starts_with("- `landmarks`"))
+            .expect("the landmark fit's summary line")
+            .to_string();
+        line.split(" facelab's AUs").next().unwrap().to_string()
+    };
+    let ours =
+        std::fs::read_to_string(results.join("smoke/latest/paper-tables/smoke_photos.md")).unwrap();
+    let committed = std::fs::read_to_string(root().join("paper-tables/photos.md")).unwrap();
+    assert_eq!(groups(&ours), groups(&committed));
+}

@@ -28,7 +28,10 @@ use crate::experiments::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::experiments::inversion::Inverter;
 use crate::experiments::stage::{text, Artifact, Unit};
 use crate::judge::{groups, Judge, Reading, ABSENT, GROUPS, GROUP_LABELS, SHOWN};
-use crate::landmark::{Blendshapes, Landmarker};
+use crate::landmark::Landmarker;
+
+/// Blendshape groups, in `judge::GROUPS` order.
+pub type Groups = [f64; GROUPS.len()];
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{png_bytes, side_by_side};
 use crate::report::render::{render, RenderOptions};
@@ -238,8 +241,8 @@ impl Experiment for Photos {
                             reading,
                             aus_in,
                             aus_out,
-                            blend_in: scores_in,
-                            blend_out: out,
+                            groups_in: groups(&scores_in),
+                            groups_out: out.as_ref().map(groups),
                         });
                     }
                     faces.push(render(&model, &state, &options));
@@ -283,8 +286,10 @@ pub struct Row {
     pub reading: Reading,
     pub aus_in: [f64; AU_COUNT],
     pub aus_out: [f64; AU_COUNT],
-    pub blend_in: Blendshapes,
-    pub blend_out: Option<Blendshapes>,
+    /// MediaPipe's blendshape groups of the picture and of the transferred face (`None`:
+    /// no face found in the render), in `judge::GROUPS` order.
+    pub groups_in: Groups,
+    pub groups_out: Option<Groups>,
 }
 
 fn csv(rows: &[Row]) -> String {
@@ -302,13 +307,12 @@ fn csv(rows: &[Row]) -> String {
             r.file,
             r.method,
             r.reading.name(),
-            u8::from(r.blend_out.is_some())
+            u8::from(r.groups_out.is_some())
         ));
         for k in 0..AU_COUNT {
             text.push_str(&format!(",{:.4},{:.4}", r.aus_in[k], r.aus_out[k]));
         }
-        let gin = groups(&r.blend_in);
-        let gout = r.blend_out.as_ref().map(groups);
+        let (gin, gout) = (r.groups_in, r.groups_out);
         for g in 0..GROUPS.len() {
             text.push_str(&format!(
                 ",{:.4},{}",
@@ -350,14 +354,13 @@ fn from_csv(text: &str) -> Result<Vec<Row>> {
             aus_in[k] = num(c[3 + 2 * k])?;
             aus_out[k] = num(c[4 + 2 * k])?;
         }
-        // Groups are stored, not the 52 scores: keep them in the first GROUPS slots.
         let base = 3 + 2 * AU_COUNT;
-        let mut blend_in = [0.0; 52];
-        let mut blend_out = [0.0; 52];
+        let mut groups_in = [0.0; GROUPS.len()];
+        let mut groups_out = [0.0; GROUPS.len()];
         for g in 0..GROUPS.len() {
-            blend_in[g] = num(c[base + 2 * g])?;
+            groups_in[g] = num(c[base + 2 * g])?;
             if c[2] == "1" {
-                blend_out[g] = num(c[base + 2 * g + 1])?;
+                groups_out[g] = num(c[base + 2 * g + 1])?;
             }
         }
         rows.push(Row {
@@ -366,8 +369,8 @@ fn from_csv(text: &str) -> Result<Vec<Row>> {
             reading,
             aus_in,
             aus_out,
-            blend_in,
-            blend_out: (c[2] == "1").then_some(blend_out),
+            groups_in,
+            groups_out: (c[2] == "1").then_some(groups_out),
         });
     }
     Ok(rows)
@@ -398,10 +401,10 @@ fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String 
     );
     for r in rows.iter().filter(|r| r.reading == Reading::Render) {
         let p = list.iter().find(|p| p.file == r.file);
-        let gin = &r.blend_in[..GROUPS.len()];
-        let (shown, kept, added, diff) = match &r.blend_out {
+        let gin = &r.groups_in;
+        let (shown, kept, added, diff) = match &r.groups_out {
             Some(out) => {
-                let gout = &out[..GROUPS.len()];
+                let gout = out;
                 let shown: Vec<usize> = (0..GROUPS.len()).filter(|&g| gin[g] >= SHOWN).collect();
                 let list: Vec<String> = shown
                     .iter()
@@ -479,9 +482,9 @@ fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String 
         let (mut shown, mut kept, mut added) = (0, 0, 0);
         let (mut low, mut strong, mut strong_kept) = (0, 0, 0);
         for r in &mine {
-            if let Some(out) = &r.blend_out {
+            if let Some(out) = &r.groups_out {
                 for g in 0..GROUPS.len() {
-                    let (a, b) = (r.blend_in[g], out[g]);
+                    let (a, b) = (r.groups_in[g], out[g]);
                     if a >= SHOWN {
                         shown += 1;
                         kept += usize::from((a - b).abs() <= 0.1);
