@@ -556,22 +556,12 @@ pub fn transfer_path(
     let mut landmarked = landmark_files(input, &opts.out, &model, calibration.clone(), neutral)?;
     let fitted = match method.unwrap_or_default() {
         TransferMethod::Network => None,
-        TransferMethod::Landmarks => {
-            let params = SolveParams {
-                tolerance: spec.dataset.tolerance,
-                ..SolveParams::default()
-            };
-            let basis = LinearBasis::build(&model, &params)
-                .context("the linear basis for the landmark-space fit")?;
-            let inverter = Inverter::new(&model, &basis, &calibration)?;
-            Some(
-                landmarked
-                    .displacements
-                    .par_iter()
-                    .map(|d| d.as_ref().map(|d| inverter.landmarks_pg(d).0))
-                    .collect(),
-            )
-        }
+        TransferMethod::Landmarks => Some(landmark_fit(
+            &spec,
+            &model,
+            &calibration,
+            &landmarked.displacements,
+        )?),
     };
     let opts = TransferOptions {
         fitted,
@@ -601,35 +591,40 @@ fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Activations>>> {
     let faces = camera_faces(&file);
     let observer = crate::observe::Observer::new(&median_face(&faces), calibration.clone())
         .with_context(|| format!("{}: the neutral face", input.display()))?;
+    let frames = file.rows.iter().map(|r| r.frame).max().unwrap_or(0).max(0) as usize;
+    let mut displacements = vec![None; frames];
+    for (r, face) in file.rows.iter().zip(&faces) {
+        if r.frame < 1 {
+            continue;
+        }
+        let d = observer
+            .displacements(face)
+            .with_context(|| format!("{}:{}", input.display(), r.line))?;
+        displacements[r.frame as usize - 1] = Some(d.iter().flatten().copied().collect());
+    }
+    landmark_fit(&spec, &model, &calibration, &displacements)
+}
+
+/// The landmark-space fit of each frame's landmark displacements (`None`: no face): the
+/// inversion table's `Inverter` on the linear basis of `model`, built at the spec's solver
+/// tolerance; the frames are fitted in parallel (each fit is a function of its frame alone).
+fn landmark_fit(
+    spec: &crate::spec::Spec,
+    model: &crate::sim::FaceModel,
+    calibration: &crate::observe::Calibration,
+    displacements: &[Option<Vec<f64>>],
+) -> Result<Vec<Option<Activations>>> {
     let params = SolveParams {
         tolerance: spec.dataset.tolerance,
         ..SolveParams::default()
     };
-    let basis = LinearBasis::build(&model, &params)
+    let basis = LinearBasis::build(model, &params)
         .context("the linear basis for the landmark-space fit")?;
-    let inverter = Inverter::new(&model, &basis, &calibration)?;
-    let frames = file.rows.iter().map(|r| r.frame).max().unwrap_or(0).max(0) as usize;
-    let mut fitted = vec![None; frames];
-    let found: Vec<(usize, Activations)> = file
-        .rows
+    let inverter = Inverter::new(model, &basis, calibration)?;
+    Ok(displacements
         .par_iter()
-        .zip(&faces)
-        .filter(|(r, _)| r.frame >= 1)
-        .map(|(r, face)| {
-            let d: Vec<f64> = observer
-                .displacements(face)
-                .with_context(|| format!("{}:{}", input.display(), r.line))?
-                .iter()
-                .flatten()
-                .copied()
-                .collect();
-            Ok((r.frame as usize - 1, inverter.landmarks_pg(&d).0))
-        })
-        .collect::<Result<_>>()?;
-    for (k, a) in found {
-        fitted[k] = Some(a);
-    }
-    Ok(fitted)
+        .map(|d| d.as_ref().map(|d| inverter.landmarks_pg(d).0))
+        .collect())
 }
 
 /// A line of a transfer's `mse.csv`: an AU (or `mean`) and its MSE against the input.
