@@ -12,12 +12,13 @@
 use anyhow::{Context, Result};
 
 use crate::landmark::{
-    blendshapes, BlendshapeNetwork, Blendshapes, Landmarker, RgbFrame, MESH_POINTS, MESH_V2_POINTS,
+    blendshapes, Blendshapes, Landmarker, RgbFrame, MESH_POINTS, MESH_V2_POINTS,
 };
 use crate::report::head::iris_points;
 use crate::report::render::{project, render, RenderOptions};
 use crate::sim::geom::V3;
 use crate::sim::{FaceModel, State};
+use crate::stats::mean_or_zero;
 
 /// The blendshape groups the judge compares: a name and the MediaPipe scores averaged.
 pub const GROUPS: [(&str, &[&str]); 18] = [
@@ -54,8 +55,11 @@ pub const GROUP_LABELS: [&str; GROUPS.len()] = [
 pub const SHOWN: f64 = 0.3;
 pub const ABSENT: f64 = 0.1;
 
+/// One face's group scores, in [`GROUPS`] order.
+pub type Groups = [f64; GROUPS.len()];
+
 /// The group scores of one face, in [`GROUPS`] order.
-pub fn groups(scores: &Blendshapes) -> [f64; GROUPS.len()] {
+pub fn groups(scores: &Blendshapes) -> Groups {
     std::array::from_fn(|g| {
         let names = GROUPS[g].1;
         names
@@ -94,8 +98,10 @@ impl Judge {
         })
     }
 
-    pub fn head(&self) -> &BlendshapeNetwork {
-        &self.landmarker.blendshapes
+    /// Its landmarker (Face Mesh v2 and the blendshape head), for pictures read frame by
+    /// frame.
+    pub fn landmarker(&self) -> &Landmarker {
+        &self.landmarker
     }
 
     /// The scores of the largest face in a picture, `None` where there is none.
@@ -140,7 +146,9 @@ pub fn mesh_points(model: &FaceModel, state: &State) -> Vec<V3> {
     points
 }
 
-/// Pearson's r of two series; `None` when either is constant or shorter than 3.
+/// Pearson's r of two series; `None` when either is constant or shorter than 3. Unlike
+/// `stats::pearson` it treats a variance below 1e-12 as none: a group read the same on every
+/// frame can leave a rounding residue instead of zero, and its r would be noise.
 pub fn pearson(a: &[f64], b: &[f64]) -> Option<f64> {
     let n = a.len().min(b.len());
     if n < 3 {
@@ -176,10 +184,18 @@ pub fn agreement(
     input: &[Option<Blendshapes>],
     output: &[Option<Blendshapes>],
 ) -> Vec<GroupAgreement> {
-    let pairs: Vec<([f64; GROUPS.len()], [f64; GROUPS.len()])> = input
+    let group = |s: &Option<Blendshapes>| s.as_ref().map(groups);
+    let input: Vec<Option<Groups>> = input.iter().map(group).collect();
+    let output: Vec<Option<Groups>> = output.iter().map(group).collect();
+    group_agreement(&input, &output)
+}
+
+/// [`agreement`] of faces already read as groups.
+pub fn group_agreement(input: &[Option<Groups>], output: &[Option<Groups>]) -> Vec<GroupAgreement> {
+    let pairs: Vec<(Groups, Groups)> = input
         .iter()
         .zip(output)
-        .filter_map(|(a, b)| Some((groups(a.as_ref()?), groups(b.as_ref()?))))
+        .filter_map(|(a, b)| Some(((*a)?, (*b)?)))
         .collect();
     GROUPS
         .iter()
@@ -187,13 +203,13 @@ pub fn agreement(
         .map(|(g, (name, _))| {
             let a: Vec<f64> = pairs.iter().map(|p| p.0[g]).collect();
             let b: Vec<f64> = pairs.iter().map(|p| p.1[g]).collect();
-            let n = a.len().max(1) as f64;
+            let diff: Vec<f64> = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).collect();
             GroupAgreement {
                 group: name,
                 frames: a.len(),
-                mean_in: a.iter().sum::<f64>() / n,
-                mean_out: b.iter().sum::<f64>() / n,
-                mean_abs_diff: a.iter().zip(&b).map(|(x, y)| (x - y).abs()).sum::<f64>() / n,
+                mean_in: mean_or_zero(&a),
+                mean_out: mean_or_zero(&b),
+                mean_abs_diff: mean_or_zero(&diff),
                 r: pearson(&a, &b),
             }
         })

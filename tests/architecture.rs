@@ -46,7 +46,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "sim", "observe", "learn", "cohort", "landmark", "io", "invert", "rng", "stats", "edit",
         ],
     ),
-    ("judge", &["sim", "landmark", "report"]),
+    ("judge", &["sim", "landmark", "report", "stats"]),
     (
         "experiments",
         &[

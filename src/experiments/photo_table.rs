@@ -25,13 +25,11 @@ use super::photos::{
 use super::table2::predict_activations;
 use crate::cache::{self, Entry};
 use crate::experiments::cell::{spec_calibration, CellRun, Experiment, Plan};
-use crate::experiments::inversion::Inverter;
+use crate::experiments::inversion::{flat, Inverter};
 use crate::experiments::stage::{text, Artifact, Unit};
-use crate::judge::{groups, Judge, Reading, ABSENT, GROUPS, GROUP_LABELS, SHOWN};
-use crate::landmark::Landmarker;
-
-/// Blendshape groups, in `judge::GROUPS` order.
-pub type Groups = [f64; GROUPS.len()];
+use crate::judge::{
+    group_agreement, groups, verdict, Groups, Judge, Reading, ABSENT, GROUPS, GROUP_LABELS, SHOWN,
+};
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{png_bytes, side_by_side};
 use crate::report::render::{render, RenderOptions};
@@ -200,8 +198,8 @@ impl Experiment for Photos {
                 }
             };
             let inverter = Inverter::new(&model, basis, &calibration)?;
-            let landmarker = Landmarker::new()?;
             let judge = Judge::new()?;
+            let landmarker = judge.landmarker();
             let options = RenderOptions::default();
             let mut ws = Workspace::new(&model)?;
             let mut rows = Vec::new();
@@ -209,7 +207,7 @@ impl Experiment for Photos {
             for p in &list {
                 let (frames, _) = read_frames(&p.path, InputKind::Image)?;
                 let l =
-                    landmark_frames(&landmarker, &model, InputKind::Image, frames, 0.0, &p.file)?;
+                    landmark_frames(landmarker, &model, InputKind::Image, frames, 0.0, &p.file)?;
                 let found = &l.found[0];
                 let (Some(metric), Some(scores_in)) = (&found.metric, found.blendshapes) else {
                     bail!("{}: no face found", p.file);
@@ -219,13 +217,7 @@ impl Experiment for Photos {
                 let points = landmarks(&metric.points);
                 let aus_in = observer.observe(&points)?.aus;
                 let network = predict_activations(mlp, None, &[aus_in])?.remove(0);
-                let d: Vec<f64> = inverter
-                    .observer
-                    .displacements(&points)?
-                    .iter()
-                    .flatten()
-                    .copied()
-                    .collect();
+                let d = flat(&inverter.observer.displacements(&points)?);
                 let (fitted, _) = inverter.landmarks_pg(&d);
                 let mut faces = Vec::new();
                 for (method, a) in METHODS.iter().zip([network, fitted]) {
@@ -376,6 +368,31 @@ fn from_csv(text: &str) -> Result<Vec<Row>> {
     Ok(rows)
 }
 
+/// An AU at or below this in the picture should stay at or below [`RAISED`] on the face.
+const ABSENT_AU: f64 = 0.5;
+const RAISED: f64 = 1.0;
+/// An AU at or above this in the picture should come out at [`KEPT`] of it or more.
+const STRONG: f64 = 2.0;
+const KEPT: f64 = 0.7;
+
+/// The AUs a row's picture does not show that its face raises.
+fn absent_raised(r: &Row) -> impl Iterator<Item = usize> + '_ {
+    (0..AU_COUNT).filter(|&k| r.aus_in[k] <= ABSENT_AU && r.aus_out[k] > RAISED)
+}
+
+/// The strong AUs of a row's picture that its face does not keep.
+fn strong_lost(r: &Row) -> impl Iterator<Item = usize> + '_ {
+    (0..AU_COUNT).filter(|&k| r.aus_in[k] >= STRONG && r.aus_out[k] < KEPT * r.aus_in[k])
+}
+
+fn or_none(v: Vec<String>) -> String {
+    if v.is_empty() {
+        "none".to_string()
+    } else {
+        v.join("; ")
+    }
+}
+
 /// `photos.md`: per picture and method, what the judge sees in and out (render reading),
 /// facelab's AUs, and a summary per method.
 fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String {
@@ -404,42 +421,24 @@ fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String 
         let gin = &r.groups_in;
         let (shown, kept, added, diff) = match &r.groups_out {
             Some(out) => {
-                let gout = out;
-                let shown: Vec<usize> = (0..GROUPS.len()).filter(|&g| gin[g] >= SHOWN).collect();
-                let list: Vec<String> = shown
-                    .iter()
-                    .map(|&g| format!("{} {:.2} -> {:.2}", GROUPS[g].0, gin[g], gout[g]))
+                let v = verdict(&group_agreement(&[Some(*gin)], &[Some(*out)]));
+                let shown: Vec<String> = (0..GROUPS.len())
+                    .filter(|&g| gin[g] >= SHOWN)
+                    .map(|g| format!("{} {:.2} -> {:.2}", GROUPS[g].0, gin[g], out[g]))
                     .collect();
-                let kept = shown
-                    .iter()
-                    .filter(|&&g| (gin[g] - gout[g]).abs() <= 0.1)
-                    .count();
                 let added: Vec<String> = (0..GROUPS.len())
-                    .filter(|&g| gin[g] < ABSENT && gout[g] >= SHOWN)
-                    .map(|g| format!("{} {:.2}", GROUPS[g].0, gout[g]))
+                    .filter(|&g| gin[g] < ABSENT && out[g] >= SHOWN)
+                    .map(|g| format!("{} {:.2}", GROUPS[g].0, out[g]))
                     .collect();
-                let diff = if shown.is_empty() {
-                    "-".to_string()
-                } else {
-                    format!(
-                        "{:.2}",
-                        shown.iter().map(|&g| (gin[g] - gout[g]).abs()).sum::<f64>()
-                            / shown.len() as f64
-                    )
-                };
                 (
-                    if list.is_empty() {
-                        "none".to_string()
+                    or_none(shown),
+                    format!("{} of {}", v.kept, v.shown),
+                    or_none(added),
+                    if v.shown == 0 {
+                        "-".to_string()
                     } else {
-                        list.join("; ")
+                        format!("{:.2}", v.shown_diff)
                     },
-                    format!("{kept} of {}", shown.len()),
-                    if added.is_empty() {
-                        "none".to_string()
-                    } else {
-                        added.join("; ")
-                    },
-                    diff,
                 )
             }
             None => (
@@ -449,21 +448,12 @@ fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String 
                 "-".into(),
             ),
         };
-        let low: Vec<String> = (0..AU_COUNT)
-            .filter(|&k| r.aus_in[k] <= 0.5 && r.aus_out[k] > 1.0)
+        let low: Vec<String> = absent_raised(r)
             .map(|k| format!("{} {:.1}", AU_NAMES[k], r.aus_out[k]))
             .collect();
-        let strong: Vec<String> = (0..AU_COUNT)
-            .filter(|&k| r.aus_in[k] >= 2.0 && r.aus_out[k] < 0.7 * r.aus_in[k])
+        let strong: Vec<String> = strong_lost(r)
             .map(|k| format!("{} {:.1} -> {:.1}", AU_NAMES[k], r.aus_in[k], r.aus_out[k]))
             .collect();
-        let or_none = |v: Vec<String>| {
-            if v.is_empty() {
-                "none".to_string()
-            } else {
-                v.join("; ")
-            }
-        };
         md.push_str(&format!(
             "| {} | {} | {} | {shown} | {kept} | {added} | {diff} | {} | {} |\n",
             p.map_or(r.file.as_str(), |p| p.stem()),
@@ -483,22 +473,13 @@ fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String 
         let (mut low, mut strong, mut strong_kept) = (0, 0, 0);
         for r in &mine {
             if let Some(out) = &r.groups_out {
-                for g in 0..GROUPS.len() {
-                    let (a, b) = (r.groups_in[g], out[g]);
-                    if a >= SHOWN {
-                        shown += 1;
-                        kept += usize::from((a - b).abs() <= 0.1);
-                    }
-                    added += usize::from(a < ABSENT && b >= SHOWN);
-                }
+                let v = verdict(&group_agreement(&[Some(r.groups_in)], &[Some(*out)]));
+                (shown, kept, added) = (shown + v.shown, kept + v.kept, added + v.added);
             }
-            for k in 0..AU_COUNT {
-                low += usize::from(r.aus_in[k] <= 0.5 && r.aus_out[k] > 1.0);
-                if r.aus_in[k] >= 2.0 {
-                    strong += 1;
-                    strong_kept += usize::from(r.aus_out[k] >= 0.7 * r.aus_in[k]);
-                }
-            }
+            low += absent_raised(r).count();
+            let all = (0..AU_COUNT).filter(|&k| r.aus_in[k] >= STRONG).count();
+            strong += all;
+            strong_kept += all - strong_lost(r).count();
         }
         md.push_str(&format!(
             "- `{method}`, over the {} pictures: of the {shown} blendshape groups the pictures \

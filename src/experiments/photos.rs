@@ -546,7 +546,7 @@ pub fn landmark_files(
         .map(|f| {
             let Some(m) = &f.metric else { return Ok(None) };
             let d = observer.displacements(&model_landmarks(m))?;
-            Ok(Some(d.iter().flatten().copied().collect()))
+            Ok(Some(super::inversion::flat(&d)))
         })
         .collect::<Result<Vec<_>>>()?;
     let pictures: Vec<image::RgbImage> = l

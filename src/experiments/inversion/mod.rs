@@ -76,7 +76,8 @@ fn activations(x: &[f64]) -> Activations {
     Activations::from_values(&v).expect("clamped")
 }
 
-fn flat(d: &[[f64; 3]; LANDMARK_COUNT]) -> Vec<f64> {
+/// Landmark displacements flattened (x, y, z per landmark), as the landmark fit takes them.
+pub(crate) fn flat(d: &[[f64; 3]; LANDMARK_COUNT]) -> Vec<f64> {
     d.iter().flatten().copied().collect()
 }
 

@@ -600,7 +600,7 @@ fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Activations>>> {
         let d = observer
             .displacements(face)
             .with_context(|| format!("{}:{}", input.display(), r.line))?;
-        displacements[r.frame as usize - 1] = Some(d.iter().flatten().copied().collect());
+        displacements[r.frame as usize - 1] = Some(super::inversion::flat(&d));
     }
     landmark_fit(&spec, &model, &calibration, &displacements)
 }
