@@ -425,23 +425,18 @@ fn divides(x: &Tensor, filter: [usize; 2], stride: [usize; 2]) -> candle_core::R
     Ok(filter == stride && h % stride[0] == 0 && w % stride[1] == 0)
 }
 
-/// TFLite's padding: SAME pads `max((out - 1) s + k - in, 0)` with the odd pixel after.
+/// The input padded with zeros by TFLite's rule ([`implicit_padding`]).
 fn pad_for(
     x: &Tensor,
     padding: Padding,
     kernel: [usize; 2],
     stride: [usize; 2],
 ) -> candle_core::Result<Tensor> {
-    if padding == Padding::Valid {
-        return Ok(x.clone());
-    }
+    let (pads, _) = implicit_padding([x.dim(2)?, x.dim(3)?], padding, kernel, stride);
     let mut x = x.clone();
-    for (axis, (k, s)) in [(2, (kernel[0], stride[0])), (3, (kernel[1], stride[1]))] {
-        let n = x.dim(axis)?;
-        let out = n.div_ceil(s);
-        let total = ((out - 1) * s + k).saturating_sub(n);
-        if total > 0 {
-            x = x.pad_with_zeros(axis, total / 2, total - total / 2)?;
+    for (axis, [before, after]) in [(2, pads[0]), (3, pads[1])] {
+        if before + after > 0 {
+            x = x.pad_with_zeros(axis, before, after)?;
         }
     }
     Ok(x)
@@ -519,7 +514,8 @@ fn depthwise(
 ) -> candle_core::Result<Tensor> {
     let (kh, kw) = (w.dim(2)?, w.dim(3)?);
     let (n, c, h, wd) = x.dims4()?;
-    let (pad, [oh, ow]) = implicit_padding([h, wd], padding, [kh, kw], stride);
+    let (pads, [oh, ow]) = implicit_padding([h, wd], padding, [kh, kw], stride);
+    let pad = [pads[0][0], pads[1][0]];
     if w.dims() != [c, 1, kh, kw] || bias.elem_count() != c || oh == 0 || ow == 0 {
         candle_core::bail!(
             "depthwise kernel {:?} and bias of {} do not fit an input of {c} channels, {h}x{wd}",
@@ -582,23 +578,24 @@ fn depthwise(
     Tensor::from_vec(out, (n, c, oh, ow), x.device())
 }
 
-/// TFLite's padding as offsets, without padding the input: the top and left padding and
-/// the output's height and width (SAME pads `max((out - 1) s + k - in, 0)` with the odd
-/// pixel after; VALID pads nothing).
+/// TFLite's padding of an input of `size` (height, width): per axis the padding before and
+/// after, and the output's height and width. SAME pads `max((out - 1) s + k - in, 0)` with
+/// the odd pixel after; VALID pads nothing (output 0 where the kernel does not fit).
 fn implicit_padding(
     size: [usize; 2],
     padding: Padding,
     kernel: [usize; 2],
     stride: [usize; 2],
-) -> ([usize; 2], [usize; 2]) {
-    let mut pad = [0; 2];
+) -> ([[usize; 2]; 2], [usize; 2]) {
+    let mut pad = [[0; 2]; 2];
     let mut out = [0; 2];
     for a in 0..2 {
         let (n, k, s) = (size[a], kernel[a], stride[a]);
         match padding {
             Padding::Same => {
                 out[a] = n.div_ceil(s);
-                pad[a] = ((out[a] - 1) * s + k).saturating_sub(n) / 2;
+                let total = ((out[a] - 1) * s + k).saturating_sub(n);
+                pad[a] = [total / 2, total - total / 2];
             }
             Padding::Valid => out[a] = n.checked_sub(k).map_or(0, |d| d / s + 1),
         }
