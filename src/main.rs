@@ -391,7 +391,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         "{}\t{:.2}\t{target}{}\t{:.2}{mark}",
                         r.row.row,
                         r.displacement_mm,
-                        if r.row.band.is_some() { "" } else { " chosen" },
+                        if r.row.chosen.is_some() {
+                            " chosen"
+                        } else {
+                            ""
+                        },
                         r.observed
                     );
                 }

@@ -43,7 +43,7 @@ pub struct Reach {
 }
 
 impl Reach {
-    /// Inside the published band, or facelab's chosen one where none is published.
+    /// Inside facelab's chosen band where it gives one, else the published band.
     pub fn in_target(&self) -> bool {
         self.row
             .target()

@@ -56,15 +56,18 @@ pub struct ReachRow {
     pub measure: Measure,
     /// Published band (mm).
     pub band: Option<(f64, f64)>,
-    /// facelab's target where no band is published (mm).
+    /// facelab's own target (mm): where no band is published, or where stronger evidence
+    /// puts the maximum beyond the published band (the real landmark data for the smile; the
+    /// published band then says what a typical effort does, and `why` says both).
     pub chosen: Option<(f64, f64)>,
     pub why: String,
 }
 
 impl ReachRow {
-    /// The band a measurement is judged by: the published one, else facelab's choice.
+    /// The band a measurement is judged by: facelab's choice where it gives one, else the
+    /// published band.
     pub fn target(&self) -> Option<(f64, f64)> {
-        self.band.or(self.chosen)
+        self.chosen.or(self.band)
     }
 
     /// The `controls` cell as written.
@@ -171,10 +174,9 @@ pub fn read_reach(path: &Path) -> Result<Vec<ReachRow>, ReachFileError> {
         };
         let band_published = band(&record[6], &record[7], "band").map_err(row_err)?;
         let chosen = band(&record[8], &record[9], "chosen").map_err(row_err)?;
-        if band_published.is_some() == chosen.is_some() {
+        if band_published.is_none() && chosen.is_none() {
             return Err(row_err(
-                "give either the published band or facelab's chosen one, not both or neither"
-                    .to_string(),
+                "give the published band, facelab's chosen one, or both".to_string(),
             ));
         }
         if record[10].trim().is_empty() {

@@ -276,6 +276,31 @@ fn behind_face(mut part: Part, outline: &[V3], surface: &[V3]) -> Part {
     part
 }
 
+/// Where an eye looks at rest: the rotation taking `+z` to the direction that puts the iris
+/// centre in front of the middle of the lid opening (its contour's bounding box in the face
+/// plane), so the eye looks straight ahead out of the opening. The eyeball's centre lies 12 mm
+/// behind the corners' midpoint, which sits below the middle of the opening (the upper lid
+/// arches higher than the lower lid dips); an iris on `+z` sat low in the opening, and
+/// MediaPipe read the rest face as looking down (eyeLookDown 0.35).
+fn gaze(eye: &crate::sim::rig::Eye, surface: &[V3], radius: f64) -> Rot3 {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for &v in &eye.contour {
+        for k in 0..2 {
+            lo[k] = lo[k].min(surface[v][k]);
+            hi[k] = hi[k].max(surface[v][k]);
+        }
+    }
+    let dx = 0.5 * (lo[0] + hi[0]) - eye.centre[0];
+    let dy = 0.5 * (lo[1] + hi[1]) - eye.centre[1];
+    let dz = (radius * radius - dx * dx - dy * dy).max(0.0).sqrt();
+    let d = normalize([dx, dy, dz]);
+    let axis = cross([0.0, 0.0, 1.0], d);
+    if norm(axis) < 1e-12 {
+        return Rot3::IDENTITY;
+    }
+    Rot3::about_axis(axis, d[2].clamp(-1.0, 1.0).acos())
+}
+
 /// An eyeball's radius: just inside its lid opening at rest.
 fn eyeball_radius(eye: &crate::sim::rig::Eye, surface: &[V3]) -> f64 {
     0.95 * eye
@@ -298,6 +323,7 @@ pub fn iris_points(model: &FaceModel, state: &State) -> [V3; 10] {
     let mut out = [[0.0; 3]; 10];
     for (k, eye) in eyes.iter().enumerate() {
         let radius = eyeball_radius(eye, surface);
+        let look = gaze(eye, surface, radius);
         let iris = IRIS_RADIUS.min(0.9 * radius);
         let front = (radius * radius - iris * iris).sqrt();
         let c = eye.centre;
@@ -309,7 +335,7 @@ pub fn iris_points(model: &FaceModel, state: &State) -> [V3; 10] {
             [0.0, -iris, front],
         ];
         for (j, d) in local.iter().enumerate() {
-            out[5 * k + j] = add(r.apply(add(c, *d)), t);
+            out[5 * k + j] = add(r.apply(add(c, look.apply(*d))), t);
         }
     }
     out
@@ -326,7 +352,14 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
     let mut out = Vec::new();
 
     for eye in &model.rig.eyes {
-        out.push(eyeball(eye.centre, eyeball_radius(eye, surface)).moved(head, &r));
+        let radius = eyeball_radius(eye, surface);
+        let look = gaze(eye, surface, radius);
+        let c = eye.centre;
+        out.push(
+            eyeball(c, radius)
+                .moved(|p| add(c, look.apply(sub(p, c))), &look)
+                .moved(head, &r),
+        );
     }
 
     // Teeth from the rest mouth: the contour's corners and its upper/lower midpoints.

@@ -95,8 +95,16 @@ pub(crate) fn spec_calibration(spec: &Spec) -> Result<Calibration> {
         .with_context(|| format!("observer.calibration = \"{}\"", spec.calibration))
 }
 
+/// The face's code version, hashed with the mesh into the face every stage solves (the basis,
+/// the dataset and the cohorts, and through them every stage after them). Bump it when the
+/// muscles, the tissue or the solver move the equilibria, or when the renderer draws a face
+/// differently (what `observer.source = "render"` reads).
+// 1: zygomaticus major widens a maximal smile by 46% (from 28%), levator labii superioris at
+// 46 N; the eyes look out of the middle of their lid openings.
+pub(crate) const FACE_VERSION: u32 = 1;
+
 pub(crate) fn assets() -> Result<Assets> {
-    let face = file_hash(&default_mesh_path())?;
+    let face = format!("{}/face-{FACE_VERSION}", file_hash(&default_mesh_path())?);
     let expressions = file_hash(&default_expressions_path())?;
     let ea = data_path(DEFAULT_EXPRESSION_AUS);
     let am = data_path(DEFAULT_AU_MUSCLES);
