@@ -4,7 +4,8 @@
 //! built in the head frame from the rest face, then carried by the head's rigid motion (fitted
 //! to the skull sheet, so a head turned by the neck carries them) and, for the lower teeth, by
 //! the mandible's. The neck's lowest ring stays put and its top follows the head, so the head
-//! turns on a neck. Colours per vertex; the rasteriser shades them.
+//! turns on a neck whose front lies behind the chin. Colours per vertex; the rasteriser shades
+//! them.
 
 use crate::observe::pose::align;
 use crate::sim::geom::{add, cross, lerp, norm, normalize, scale, sub, Rigid, Rot3, V3};
@@ -450,10 +451,18 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         out.push(ear.moved(head, &r));
     }
 
-    // Neck: rings from inside the head down, the top ring with the head, the bottom fixed.
+    // Neck: rings from inside the head down, the top ring with the head, the bottom fixed. Its
+    // front (the throat) lies 5.5 cm behind the chin, as in an adult's profile, so the chin of
+    // an opened jaw, which swings down and back, stays in front of it (with its front 1.6 cm
+    // behind the chin, the neck hid the lower face of a wide-open mouth).
+    let chin = outline
+        .iter()
+        .copied()
+        .min_by(|a, b| a[1].total_cmp(&b[1]))
+        .unwrap_or([0.0; 3]);
     let neck_top = eyes_y - 0.05;
     let neck_bottom = eyes_y - 0.30;
-    let neck_centre_z = centre[2] + 0.005;
+    let neck_centre_z = chin[2] - 0.055 - 0.062;
     let neck = Part::grid(
         24,
         40,

@@ -100,7 +100,8 @@ pub(crate) fn spec_calibration(spec: &Spec) -> Result<Calibration> {
 /// muscles, the tissue or the solver move the equilibria, or when the renderer draws a face
 /// differently (what `observer.source = "render"` reads).
 // 1: zygomaticus major widens a maximal smile by 46% (from 28%), levator labii superioris at
-// 46 N; the eyes look out of the middle of their lid openings.
+// 46 N; the eyes look out of the middle of their lid openings; the neck's front lies 5.5 cm
+// behind the chin.
 pub(crate) const FACE_VERSION: u32 = 1;
 
 pub(crate) fn assets() -> Result<Assets> {
