@@ -432,11 +432,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         "{kind}: {} cases, {converged} converged, {valid} valid; iterations \
                          median {}",
                         of_kind.len(),
-                        {
-                            let mut it: Vec<usize> = of_kind.iter().map(|l| l.iterations).collect();
-                            it.sort_unstable();
-                            it.get(it.len() / 2).copied().unwrap_or(0)
-                        }
+                        facelab::stats::median(
+                            &mut of_kind
+                                .iter()
+                                .map(|l| l.iterations as f64)
+                                .collect::<Vec<_>>()
+                        )
                     );
                 }
                 for l in lines.iter().filter(|l| !l.is_valid()) {

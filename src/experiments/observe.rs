@@ -116,22 +116,9 @@ pub(crate) fn median_face(faces: &[[V3; LANDMARK_COUNT]]) -> [V3; LANDMARK_COUNT
     std::array::from_fn(|i| {
         std::array::from_fn(|k| {
             let mut v: Vec<f64> = faces.iter().map(|f| f[i][k]).collect();
-            median(&mut v)
+            crate::stats::median(&mut v)
         })
     })
-}
-
-/// The median (NaN for no values); sorts `values`.
-pub(crate) fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
 }
 
 /// An OpenFace file our observer can read: with 3D landmarks and at least one used row.

@@ -632,10 +632,7 @@ pub(crate) fn face_window(l: &Landmarked) -> [u32; 4] {
         .collect();
     let mut xs: Vec<f64> = rects.iter().map(|r| r.center[0]).collect();
     let mut ys: Vec<f64> = rects.iter().map(|r| r.center[1]).collect();
-    let (cx, cy) = (
-        super::observe::median(&mut xs),
-        super::observe::median(&mut ys),
-    );
+    let (cx, cy) = (crate::stats::median(&mut xs), crate::stats::median(&mut ys));
     let side = rects.iter().map(|r| r.width).fold(0.0, f64::max) * 1.1;
     let (w, h) = (l.width as f64, l.height as f64);
     let side = side.min(w).min(h).max(2.0);

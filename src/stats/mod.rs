@@ -13,6 +13,20 @@ pub fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
 }
 
+/// The median (NaN for no values; the mean of the middle two for an even count); sorts
+/// `values`.
+pub fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    }
+}
+
 /// The mean, 0 for no values (a mean error over nothing).
 pub fn mean_or_zero(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64

@@ -1,10 +1,10 @@
 //! `facelab bench solve`: the face's equilibrium solves, cold, warm and from the basis.
 
 use crate::experiments::face::FaceSource;
-use crate::experiments::observe::median;
 use crate::sim::basis::LinearBasis;
 use crate::sim::solver::{iteration_cost, softest_mode, solve_predicted, SoftMode};
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
+use crate::stats::median;
 use anyhow::Result;
 use std::io::Write;
 use std::time::Instant;
