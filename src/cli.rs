@@ -191,7 +191,7 @@ pub enum Command {
         #[arg(long, default_value = "results")]
         results: PathBuf,
         /// Where the units of work run [default: the spec's `[launcher] kind`, else local]:
-        /// `slurm` submits them as Slurm job arrays and a final job (see the README)
+        /// `slurm` submits them as Slurm job arrays and a final job (see docs/running.md)
         #[arg(long, value_parser = ["local", "slurm"])]
         launcher: Option<String>,
         /// With --launcher slurm: wait until the jobs ended; fail naming each failed task
