@@ -232,7 +232,14 @@ fn check_derivatives(m: &FaceModel, lips_crossed: bool) {
             .positions;
         let active = m.lips.active(&x);
         assert!(active.len() >= 2, "{} contacts", active.len());
-        assert!(active.iter().all(|c| c.gap < -1e-3));
+        // Every contact is crossed by far more than the probe below moves a node (noise
+        // 2e-6 m, difference steps 1e-7 m times a unit direction), so none switches on or
+        // off inside the finite differences.
+        let gaps: Vec<f64> = active.iter().map(|c| c.gap).collect();
+        assert!(
+            gaps.iter().all(|&g| g < -1e-4),
+            "contact gaps (m): {gaps:?}"
+        );
     }
     // Off equilibrium, so the gradient is large against the difference's error; less so
     // on the crossed lips, whose thin prisms would invert.
