@@ -302,6 +302,13 @@ fn gaze(eye: &crate::sim::rig::Eye, surface: &[V3], radius: f64) -> Rot3 {
     Rot3::about_axis(axis, d[2].clamp(-1.0, 1.0).acos())
 }
 
+/// An eyeball at rest: its radius and where it looks ([`gaze`]), one definition for the
+/// drawn eyeball and the iris points the judge reads.
+fn eyeball_pose(eye: &crate::sim::rig::Eye, surface: &[V3]) -> (f64, Rot3) {
+    let radius = eyeball_radius(eye, surface);
+    (radius, gaze(eye, surface, radius))
+}
+
 /// An eyeball's radius: just inside its lid opening at rest.
 fn eyeball_radius(eye: &crate::sim::rig::Eye, surface: &[V3]) -> f64 {
     0.95 * eye
@@ -323,8 +330,7 @@ pub fn iris_points(model: &FaceModel, state: &State) -> [V3; 10] {
     eyes.sort_by(|a, b| a.centre[0].total_cmp(&b.centre[0]));
     let mut out = [[0.0; 3]; 10];
     for (k, eye) in eyes.iter().enumerate() {
-        let radius = eyeball_radius(eye, surface);
-        let look = gaze(eye, surface, radius);
+        let (radius, look) = eyeball_pose(eye, surface);
         let iris = IRIS_RADIUS.min(0.9 * radius);
         let front = (radius * radius - iris * iris).sqrt();
         let c = eye.centre;
@@ -353,8 +359,7 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
     let mut out = Vec::new();
 
     for eye in &model.rig.eyes {
-        let radius = eyeball_radius(eye, surface);
-        let look = gaze(eye, surface, radius);
+        let (radius, look) = eyeball_pose(eye, surface);
         let c = eye.centre;
         out.push(
             eyeball(c, radius)
@@ -462,7 +467,8 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         .unwrap_or([0.0; 3]);
     let neck_top = eyes_y - 0.05;
     let neck_bottom = eyes_y - 0.30;
-    let neck_centre_z = chin[2] - 0.055 - 0.062;
+    let (neck_half_width, neck_half_depth) = (0.06, 0.062);
+    let neck_centre_z = chin[2] - 0.055 - neck_half_depth;
     let neck = Part::grid(
         24,
         40,
@@ -470,7 +476,11 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         |u, v| {
             let phi = u * std::f64::consts::TAU;
             let y = neck_top + v * (neck_bottom - neck_top);
-            [0.06 * phi.cos(), y, neck_centre_z + 0.062 * phi.sin()]
+            [
+                neck_half_width * phi.cos(),
+                y,
+                neck_centre_z + neck_half_depth * phi.sin(),
+            ]
         },
         |_, _, _| SKIN,
     );
