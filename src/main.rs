@@ -149,6 +149,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             assemble,
         } => {
             let threads = set_threads(threads)?;
+            let spec = data_arg(spec);
             let given = launcher
                 .as_deref()
                 .and_then(facelab::spec::LauncherKind::parse);
@@ -200,7 +201,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             run::task(&launch, &array, index)?;
         }
         Command::Check { spec, sets } => {
-            let cells = facelab::spec::load(&spec, &sets)?;
+            let cells = facelab::spec::load(&data_arg(spec), &sets)?;
             for cell in cells {
                 if !cell.name.is_empty() {
                     println!("# cell {}", cell.name);
@@ -214,7 +215,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             results,
         } => {
             let results = results_folder(results);
-            let lines = run::status(&spec, &sets, &results)?;
+            let lines = run::status(&data_arg(spec), &sets, &results)?;
             let (mut cached, mut todo) = (0, 0);
             for line in &lines {
                 let (state, note) = match &line.state {
@@ -274,6 +275,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             out,
         } => {
             let input = input.or(openface).expect("clap requires an input");
+            let (model, neck) = (data_arg(model), neck.map(data_arg));
             let (summary, landmarked) = transfer::transfer_path(
                 &input,
                 &transfer::TransferOptions {
@@ -553,6 +555,17 @@ fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
         .build_global()
         .context("starting the thread pool")?;
     Ok(n)
+}
+
+/// A file or folder of the checkout named on the command line (a spec, a run folder): as
+/// given where it exists, else found in the checkout or the binary's built-in copy
+/// ([`facelab::io::data_path`]), so `facelab run experiments/smoke.toml` and the default
+/// `--model results/paper/latest` work from any folder.
+fn data_arg(given: PathBuf) -> PathBuf {
+    if given.exists() || given.is_absolute() {
+        return given;
+    }
+    given.to_str().map_or(given.clone(), facelab::io::data_path)
 }
 
 /// The results folder: the default `results` means the checkout's `results/` when the working

@@ -246,27 +246,45 @@ fn observe_without_3d_landmarks_says_so() {
     assert!(!out.exists(), "nothing written on error");
 }
 
-/// A copy of the binary, run from a folder outside the checkout on the checkout's smoke spec:
-/// nothing is read from where it was built (the face, the tables and the calibration resolve
-/// from the spec's checkout), and results, tables and figures go where they are told.
+/// A copy of the binary, as `cargo install` leaves it, run from an empty folder outside any
+/// checkout with a cache folder of its own: it reads a photo, transfers it with the default
+/// model and neck, renders an expression and runs the smoke spec by its checkout name and
+/// through a spec the user wrote that extends it, all from the data compiled into it
+/// (written out once under `$XDG_CACHE_HOME/facelab`), and writes only where it is told.
 #[test]
-fn a_copied_binary_runs_the_smoke_spec_from_another_folder() {
-    let dir = crate::temp("cli", "copied-binary");
+fn an_installed_binary_runs_from_an_empty_folder() {
+    let dir = crate::temp("cli", "installed-binary");
     let work = dir.join("elsewhere");
     std::fs::create_dir_all(&work).unwrap();
     let binary = dir.join("facelab");
     std::fs::copy(env!("CARGO_BIN_EXE_facelab"), &binary).unwrap();
-    let spec = crate::root().join("experiments/smoke.toml");
-    let out = Command::new(&binary)
-        .current_dir(&work)
-        .args(["run", spec.to_str().unwrap(), "--results", "out/results"])
-        .output()
-        .expect("run the copied binary");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    std::fs::copy(
+        crate::root().join("tests/data/landmarker/photos/grace_hopper.jpg"),
+        work.join("photo.jpg"),
+    )
+    .unwrap();
+    let cache = dir.join("cache");
+    let facelab = |args: &[&str]| {
+        let out = Command::new(&binary)
+            .current_dir(&work)
+            .env("XDG_CACHE_HOME", &cache)
+            .args(args)
+            .output()
+            .expect("run the copied binary");
+        assert!(
+            out.status.success(),
+            "facelab {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    facelab(&["observe", "photo.jpg", "--out", "observed"]);
+    assert!(work.join("observed/openface.csv").is_file());
+    facelab(&["transfer", "photo.jpg", "--out", "transferred"]);
+    assert!(work.join("transferred/activations.csv").is_file());
+    facelab(&["render", "--expression", "joy", "--out", "joy.png"]);
+    assert!(work.join("joy.png").is_file());
+    facelab(&["run", "experiments/smoke.toml", "--results", "out/results"]);
     let run = work.join("out/results/smoke/latest");
     for file in ["table1.csv", "table2.csv", "inversion.csv", "spec.toml"] {
         assert!(run.join(file).is_file(), "{file} missing");
@@ -274,6 +292,21 @@ fn a_copied_binary_runs_the_smoke_spec_from_another_folder() {
     assert!(work.join("out/paper-tables/smoke_table1.md").is_file());
     assert!(work.join("out/paper-tables/smoke_methods.md").is_file());
     assert!(run.join("timings/inversion.md").is_file());
+    // A spec of one's own extends a built-in one; its cells are the smoke run's, cached.
+    std::fs::write(
+        work.join("mine.toml"),
+        "extends = \"experiments/smoke.toml\"\nexperiment = \"mine\"\n",
+    )
+    .unwrap();
+    facelab(&["run", "mine.toml", "--results", "out/results"]);
+    assert_eq!(
+        std::fs::read(work.join("out/results/mine/latest/table1.csv")).unwrap(),
+        std::fs::read(run.join("table1.csv")).unwrap()
+    );
+    // The built-in data was written under the cache folder given, and nowhere in the work.
+    let data: Vec<_> = std::fs::read_dir(cache.join("facelab")).unwrap().collect();
+    assert_eq!(data.len(), 1);
+    assert!(!work.join("experiments").exists() && !work.join("assets").exists());
 }
 
 /// From a subfolder of the checkout the default results folder is still the checkout's.

@@ -6,6 +6,7 @@ pub mod atomic;
 pub mod blendshapes;
 pub mod calibration;
 pub mod curves;
+pub mod embedded;
 pub mod expressions;
 pub mod facs;
 pub mod mesh;
@@ -53,18 +54,26 @@ pub fn data_root() -> Option<PathBuf> {
         .or_else(|| DATA_ROOT.get().cloned())
 }
 
-/// A data file of the checkout (`rel` from its root, or absolute): as given if it exists from
-/// the working folder, else under `data_root()`. The binary reads nothing from where it was
-/// built, so a copy of it works from any folder of any checkout. When the file is nowhere the
-/// path is returned as given, and the error that reads it names it.
+/// A data file or folder of the checkout (`rel` from its root, or absolute): as given if it
+/// exists from the working folder, else under `data_root()`, else the copy compiled into the
+/// binary ([`embedded`], written out once to the user's cache folder). The binary reads
+/// nothing from where it was built, so an installed copy works from any folder. When the file
+/// is nowhere the path is returned as given, and the error that reads it names it.
 pub fn data_path(rel: &str) -> PathBuf {
     let local = PathBuf::from(rel);
     if local.exists() || local.is_absolute() {
         return local;
     }
-    match data_root() {
-        Some(root) if root.join(rel).exists() => root.join(rel),
-        _ => local,
+    if let Some(root) = data_root().filter(|root| root.join(rel).exists()) {
+        return root.join(rel);
+    }
+    match embedded::materialize(rel) {
+        Some(Ok(path)) => path,
+        Some(Err(e)) => {
+            eprintln!("warning: the built-in copy of {rel} could not be written out: {e}");
+            local
+        }
+        None => local,
     }
 }
 

@@ -245,7 +245,15 @@ fn load_chain(
             value: Value::String(base),
             origin,
         }) => {
-            let base_path = path.parent().unwrap_or(Path::new(".")).join(&base);
+            // Beside the spec, else a spec of the checkout or the binary's built-in copy
+            // (`extends = "experiments/paper.toml"` from a spec of one's own, anywhere).
+            let mut base_path = path.parent().unwrap_or(Path::new(".")).join(&base);
+            if !base_path.exists() && Path::new(&base).is_relative() {
+                let found = crate::io::data_path(&base);
+                if found.exists() {
+                    base_path = found;
+                }
+            }
             if !base_path.exists() {
                 return Err(SpecError::Invalid {
                     origin,
