@@ -36,8 +36,9 @@ use crate::report::render::{render, RenderOptions};
 use crate::sim::basis::LinearBasis;
 use crate::sim::{solve_from_rest, SolveParams, Workspace};
 
-// 1: first version. 2: the landmark-space method beside the network.
-const PHOTOS_VERSION: u32 = 2;
+// 1: first version. 2: the landmark-space method beside the network. 3: the landmark fit
+// corrected through the nonlinear face (`inversion.refinements` times).
+const PHOTOS_VERSION: u32 = 3;
 
 /// The transfer methods, in table order.
 pub const METHODS: [&str; 2] = ["network", "landmarks"];
@@ -103,10 +104,10 @@ pub fn pictures() -> Result<Vec<Picture>> {
 }
 
 /// The list's and every picture's content, as key text.
-fn content(pictures: &[Picture]) -> Result<String> {
+fn content(pictures: &[Picture], refinements: usize) -> Result<String> {
     let list = crate::io::data_path(PHOTOS_LIST);
     let mut content = format!(
-        "list={}\n",
+        "list={}\nrefinements={refinements}\n",
         cache::sha256(&std::fs::read(&list).with_context(|| list.display().to_string())?)
     );
     for p in pictures {
@@ -162,7 +163,7 @@ impl Experiment for Photos {
     }
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {
-        let content = content(&pictures()?)?;
+        let content = content(&pictures()?, plan.spec.inversion.refinements)?;
         let k = plan.keys();
         let Some((_, train_key)) = k.unified().into_iter().next() else {
             bail!("the photo table needs a unified network (table1's training)");
@@ -174,8 +175,8 @@ impl Experiment for Photos {
 
     fn run(&self, cx: &mut CellRun) -> Result<()> {
         let list = pictures()?;
-        let content = content(&list)?;
         let spec = cx.spec;
+        let content = content(&list, spec.inversion.refinements)?;
         let (n, k, model, basis) = (cx.networks()?, cx.keys()?, cx.model()?, cx.basis()?);
         let (_, train_key, mlp) = n
             .unified(&k)
@@ -218,7 +219,10 @@ impl Experiment for Photos {
                 let aus_in = observer.observe(&points)?.aus;
                 let network = predict_activations(mlp, None, &[aus_in])?.remove(0);
                 let d = flat(&inverter.observer.displacements(&points)?);
-                let (fitted, _) = inverter.landmarks_pg(&d);
+                let fitted = inverter
+                    .landmarks_refined(&d, spec.inversion.refinements, &mut ws, &params)
+                    .with_context(|| format!("{}: the landmark fit's face", p.file))?
+                    .activations;
                 let mut faces = Vec::new();
                 for (method, a) in METHODS.iter().zip([network, fitted]) {
                     let (state, _) = solve_from_rest(&model, &a, &mut ws, &params)

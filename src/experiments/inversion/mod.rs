@@ -151,6 +151,63 @@ impl<'a> Inverter<'a> {
         (activations(&s.a), s.iterations)
     }
 
+    /// Landmark-space fit of displacements `d` corrected through the nonlinear face
+    /// (defect correction, as `aus_refined` does in AU space): the box fit on the basis,
+    /// then `refinements` times the nonlinear face is solved at the fit, its landmark
+    /// displacements' departure from the basis' prediction (`f_nl(x) - M x`) is subtracted
+    /// from the target and the box fit repeated from `x`. The basis is stiffer or softer
+    /// than the face where muscles bunch or the lips meet, so the basis fit under- or
+    /// overshoots there; each correction moves the fit toward what the face itself makes.
+    /// Keeps the iterate whose nonlinear face is closest to `d` (RMS over the 68 landmarks);
+    /// an iterate the face cannot be solved at ends the corrections. A function of `d`
+    /// alone (each solve starts from the basis prediction). Returns the activations and
+    /// the RMS of the kept and of the first fit.
+    pub fn landmarks_refined(
+        &self,
+        d: &[f64],
+        refinements: usize,
+        ws: &mut Workspace,
+        params: &SolveParams,
+    ) -> Result<Refined> {
+        let (first, _) = self.landmarks(d, Bound::Box);
+        let mut x = first.a.clone();
+        let mut best: Option<(f64, Vec<f64>)> = None;
+        let mut first_rms = None;
+        for step in 0..=refinements {
+            let nl = match self.solve(&activations(&x), ws, params) {
+                Ok((_, nl)) => nl,
+                // The first fit must solve for there to be anything to correct.
+                Err(e) if step == 0 => return Err(e),
+                Err(_) => break,
+            };
+            let e = rms(&nl, d);
+            first_rms.get_or_insert(e);
+            if best.as_ref().is_none_or(|b| e < b.0) {
+                best = Some((e, x.clone()));
+            }
+            if step == refinements {
+                break;
+            }
+            let target: Vec<f64> = d
+                .iter()
+                .zip(&nl)
+                .enumerate()
+                .map(|(i, (t, n))| {
+                    let linear: f64 = self.columns.iter().zip(&x).map(|(c, v)| c[i] * v).sum();
+                    t - (n - linear)
+                })
+                .collect();
+            let qp = BoxQp::least_squares(&self.columns, &target);
+            x = accelerated(&qp, Bound::Box, &x, 1e-6, 20_000).a;
+        }
+        let (rms_kept, x) = best.expect("the first step either solved or returned");
+        Ok(Refined {
+            activations: activations(&x),
+            rms: rms_kept,
+            first_rms: first_rms.expect("set with best"),
+        })
+    }
+
     /// Landmark-space fit of displacements `d` under `bound`, from rest, to a proximal
     /// gradient of 1e-6 relative (at most 20,000 iterations). Also returns the final
     /// proximal gradient's norm relative to `|M^T d|`, the unit of that test.
@@ -160,6 +217,15 @@ impl<'a> Inverter<'a> {
         let relative = s.gradient_norm / qp.gradient_scale();
         (s, relative)
     }
+}
+
+/// What [`Inverter::landmarks_refined`] found: the kept activations and the landmark RMS
+/// (IOD units) of their nonlinear face and of the uncorrected fit's.
+#[derive(Clone, Debug)]
+pub struct Refined {
+    pub activations: Activations,
+    pub rms: f64,
+    pub first_rms: f64,
 }
 
 /// One inverted frame: per method, the transferred AUs, the nonlinear face's landmark error

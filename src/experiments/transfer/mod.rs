@@ -607,7 +607,9 @@ fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Activations>>> {
 
 /// The landmark-space fit of each frame's landmark displacements (`None`: no face): the
 /// inversion table's `Inverter` on the linear basis of `model`, built at the spec's solver
-/// tolerance; the frames are fitted in parallel (each fit is a function of its frame alone).
+/// tolerance, corrected `inversion.refinements` times through the nonlinear face
+/// ([`Inverter::landmarks_refined`]); the frames are fitted in parallel (each fit is a
+/// function of its frame alone).
 fn landmark_fit(
     spec: &crate::spec::Spec,
     model: &crate::sim::FaceModel,
@@ -621,10 +623,22 @@ fn landmark_fit(
     let basis = LinearBasis::build(model, &params)
         .context("the linear basis for the landmark-space fit")?;
     let inverter = Inverter::new(model, &basis, calibration)?;
-    Ok(displacements
+    let refinements = spec.inversion.refinements;
+    displacements
         .par_iter()
-        .map(|d| d.as_ref().map(|d| inverter.landmarks_pg(d).0))
-        .collect())
+        .enumerate()
+        .map_init(
+            || Workspace::new(model),
+            |ws, (i, d)| {
+                let Some(d) = d else { return Ok(None) };
+                let ws = ws.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+                let fit = inverter
+                    .landmarks_refined(d, refinements, ws, &params)
+                    .with_context(|| format!("frame {}: the landmark fit's face", i + 1))?;
+                Ok(Some(fit.activations))
+            },
+        )
+        .collect()
 }
 
 /// A line of a transfer's `mse.csv`: an AU (or `mean`) and its MSE against the input.
