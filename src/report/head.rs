@@ -1,11 +1,11 @@
 //! What the renderer draws beside the simulated skin, so a render reads as a head: eyeballs
 //! (sclera, iris, pupil) behind the lids, upper teeth fixed to the skull and lower teeth on the
-//! mandible, the cranium with hair, the ears and a neck. None of it is simulated; each part is
-//! built in the head frame from the rest face, then carried by the head's rigid motion (fitted
-//! to the skull sheet, so a head turned by the neck carries them) and, for the lower teeth, by
-//! the mandible's. The neck's lowest ring stays put and its top follows the head, so the head
-//! turns on a neck whose front lies behind the chin. Colours per vertex; the rasteriser shades
-//! them.
+//! mandible, the cranium with hair, the ears and a neck on shoulders. None of it is
+//! simulated; each part is built in the head frame from the rest face, then carried by the
+//! head's rigid motion (fitted to the skull sheet, so a head turned by the neck carries them)
+//! and, for the lower teeth, by the mandible's. The shoulders stay put and the neck's top
+//! follows the head, so the head turns on a neck whose front lies behind the chin. Colours per
+//! vertex; the rasteriser shades them.
 
 use crate::observe::pose::align;
 use crate::sim::geom::{add, cross, lerp, norm, normalize, scale, sub, Rigid, Rot3, V3};
@@ -465,21 +465,30 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         .copied()
         .min_by(|a, b| a[1].total_cmp(&b[1]))
         .unwrap_or([0.0; 3]);
+    // Below the chin the neck runs 6.5 cm, as an adult's front does in a frontal view to the
+    // top of the trapezius, then widens over 4.5 cm into the slope of the shoulders (a bust's
+    // base), instead of a cylinder as long as the face.
     let neck_top = eyes_y - 0.05;
-    let neck_bottom = eyes_y - 0.30;
+    let flare_top = chin[1] - 0.065;
+    let neck_bottom = chin[1] - 0.11;
     let (neck_half_width, neck_half_depth) = (0.06, 0.062);
+    let (shoulder_half_width, shoulder_half_depth) = (0.17, 0.085);
     let neck_centre_z = chin[2] - 0.055 - neck_half_depth;
     let neck = Part::grid(
-        24,
+        32,
         40,
         true,
         |u, v| {
             let phi = u * std::f64::consts::TAU;
             let y = neck_top + v * (neck_bottom - neck_top);
+            let t = ((flare_top - y) / (flare_top - neck_bottom)).clamp(0.0, 1.0);
+            let t = t * t * (3.0 - 2.0 * t);
+            let half_width = neck_half_width + t * (shoulder_half_width - neck_half_width);
+            let half_depth = neck_half_depth + t * (shoulder_half_depth - neck_half_depth);
             [
-                neck_half_width * phi.cos(),
+                half_width * phi.cos(),
                 y,
-                neck_centre_z + neck_half_depth * phi.sin(),
+                neck_centre_z + half_depth * phi.sin(),
             ]
         },
         |_, _, _| SKIN,
@@ -489,7 +498,8 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
             .positions
             .iter()
             .map(|&p| {
-                let w = ((p[1] - neck_bottom) / (neck_top - neck_bottom)).clamp(0.0, 1.0);
+                // The shoulders stay; the neck above them bends toward the head.
+                let w = ((p[1] - flare_top) / (neck_top - flare_top)).clamp(0.0, 1.0);
                 let w = w * w * (3.0 - 2.0 * w);
                 lerp(p, head(p), w)
             })

@@ -38,8 +38,9 @@ pub use report::{bars, csv, frames_csv, markdown, sweep_figure, sweep_markdown, 
 // 3: video heads sway about their mean pose (cohort.*.head_motion_deg, head_motion_hz).
 const COHORT_VERSION: u32 = 3;
 const TRANSFER_VERSION: u32 = 2;
-// 3: renders show eyeballs, teeth, brows, lips and the head on a neck.
-const RENDERS_VERSION: u32 = 3;
+// 3: renders show eyeballs, teeth, brows, lips and the head on a neck. 4: the neck runs
+// 6.5 cm below the chin onto shoulders.
+const RENDERS_VERSION: u32 = 4;
 
 /// What Table 2 needs from the rest of the cell.
 pub struct Inputs<'a> {
