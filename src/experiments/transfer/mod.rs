@@ -35,6 +35,7 @@ use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::basis::LinearBasis;
 use crate::sim::controls::control_names;
+use crate::sim::solver::solve_predicted;
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 
 #[derive(Clone, Debug)]
@@ -62,8 +63,20 @@ pub struct TransferOptions {
     /// Read the transferred face with MediaPipe's blendshapes (`fidelity.csv`, `fidelity.md`).
     pub judge: bool,
     /// Activations per input frame (indexed like `pictures`) found without the network (the
-    /// landmark-space fit); `None`: the network's, from the AUs.
-    pub fitted: Option<Vec<Option<Activations>>>,
+    /// landmark-space fit), each with its face already solved; `None`: the network's, from
+    /// the AUs.
+    pub fitted: Option<Vec<Option<Fitted>>>,
+}
+
+/// A frame's activations found without the network, and their face, solved at the run's
+/// tolerance. Each such frame is a function of its own input, so the frames are solved in
+/// parallel and the transfer takes their faces as they are instead of solving again frame by
+/// frame (fitted activations jump from frame to frame, which makes a warm-started chain slow).
+/// `state: None`: the face did not solve there, and the transfer tries it in its own way.
+#[derive(Clone, Debug)]
+pub struct Fitted {
+    pub activations: Activations,
+    pub state: Option<crate::sim::State>,
 }
 
 /// How a picture's expression becomes activations.
@@ -217,18 +230,25 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
             Some(super::table2::range_map(kind, &reference, &target))
         }
     };
-    let acts = match &opts.fitted {
-        Some(fitted) => file
-            .rows
-            .iter()
-            .map(|r| {
-                usize::try_from(r.frame - 1)
-                    .ok()
-                    .and_then(|k| fitted.get(k).cloned().flatten())
-                    .with_context(|| format!("frame {}: no fitted activations", r.frame))
-            })
-            .collect::<Result<Vec<_>>>()?,
-        None => predict_activations(&mlp, map.as_ref(), &reference)?,
+    let (acts, mut presolved) = match &opts.fitted {
+        Some(fitted) => {
+            let rows = file
+                .rows
+                .iter()
+                .map(|r| {
+                    usize::try_from(r.frame - 1)
+                        .ok()
+                        .and_then(|k| fitted.get(k).cloned().flatten())
+                        .with_context(|| format!("frame {}: no fitted activations", r.frame))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            rows.into_iter().map(|f| (f.activations, f.state)).unzip()
+        }
+        None => {
+            let acts = predict_activations(&mlp, map.as_ref(), &reference)?;
+            let none = vec![None; acts.len()];
+            (acts, none)
+        }
     };
 
     let source = FaceSource::of_spec(&spec);
@@ -291,7 +311,8 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     let mut solved = vec![true; n];
     let failures = solve_clip_tolerant(
         &acts,
-        |a, previous: Option<&crate::sim::State>, ws| match previous {
+        |i, a, previous: Option<&crate::sim::State>, ws| match previous {
+            _ if presolved[i].is_some() => Ok(presolved[i].take().expect("checked")),
             Some(p) => {
                 let mut s = p.clone();
                 solve(&model, a, &mut s, ws, &params)?;
@@ -474,27 +495,28 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     })
 }
 
-/// Solves a clip frame by frame, each from the previous solved frame (`solve(a, Some(prev))`)
-/// and, where that fails, again from rest (`solve(a, None)`, the continuation from neutral);
+/// Solves a clip frame by frame, each from the previous solved frame
+/// (`solve(i, a, Some(prev))`) and, where that fails, again from rest (`solve(i, a, None)`,
+/// the continuation from neutral);
 /// a frame that fails both is handed to `each` as `None` and the next frame starts from the
 /// last solved one. Returns the failed frames with the solver's reason, so that one hard
 /// frame does not sink a file.
 pub fn solve_clip_tolerant<S: Clone>(
     frames: &[Activations],
-    mut solve: impl FnMut(&Activations, Option<&S>, &mut Workspace) -> Result<S>,
+    mut solve: impl FnMut(usize, &Activations, Option<&S>, &mut Workspace) -> Result<S>,
     ws: &mut Workspace,
     mut each: impl FnMut(usize, Option<&S>) -> Result<()>,
 ) -> Result<Vec<(usize, String)>> {
     let mut last: Option<S> = None;
     let mut failures = Vec::new();
     for (i, a) in frames.iter().enumerate() {
-        let warm = last.as_ref().map(|p| solve(a, Some(p), ws));
+        let warm = last.as_ref().map(|p| solve(i, a, Some(p), ws));
         let result = match warm {
             Some(Ok(s)) => Ok(s),
             Some(Err(first)) => {
-                solve(a, None, ws).map_err(|e| format!("{first:#}; from rest: {e:#}"))
+                solve(i, a, None, ws).map_err(|e| format!("{first:#}; from rest: {e:#}"))
             }
-            None => solve(a, None, ws).map_err(|e| format!("{e:#}")),
+            None => solve(i, a, None, ws).map_err(|e| format!("{e:#}")),
         };
         match result {
             Ok(s) => {
@@ -582,7 +604,7 @@ pub fn transfer_path(
 
 /// The landmark-space fit of every used row of an OpenFace file with 3D landmarks, against
 /// the file's own neutral face (the per-landmark median of its rows), indexed by `frame - 1`.
-fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Activations>>> {
+fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Fitted>>> {
     use super::observe::{camera_faces, median_face, read_observable};
     let file = read_observable(input).context("--method landmarks fits the file's 3D landmarks")?;
     let spec = run_spec(run)?;
@@ -615,7 +637,7 @@ fn landmark_fit(
     model: &crate::sim::FaceModel,
     calibration: &crate::observe::Calibration,
     displacements: &[Option<Vec<f64>>],
-) -> Result<Vec<Option<Activations>>> {
+) -> Result<Vec<Option<Fitted>>> {
     let params = SolveParams {
         tolerance: spec.dataset.tolerance,
         ..SolveParams::default()
@@ -635,7 +657,23 @@ fn landmark_fit(
                 let fit = inverter
                     .landmarks_refined(d, refinements, ws, &params)
                     .with_context(|| format!("frame {}: the landmark fit's face", i + 1))?;
-                Ok(Some(fit.activations))
+                // The kept face, solved at the loosened tolerance, is a near start for the
+                // full one; where that fails, the basis prediction.
+                let a = fit.activations;
+                let near = fit.state.and_then(|mut state| {
+                    solve(model, &a, &mut state, ws, &params)
+                        .ok()
+                        .map(|_| state)
+                });
+                let state = near.or_else(|| {
+                    solve_predicted(model, &basis, &a, ws, &params)
+                        .ok()
+                        .map(|r| r.0)
+                });
+                Ok(Some(Fitted {
+                    activations: a,
+                    state,
+                }))
             },
         )
         .collect()
@@ -667,7 +705,7 @@ mod tests {
         let mut seen = Vec::new();
         let failures = solve_clip_tolerant(
             &frames,
-            |_, previous: Option<&usize>, _| {
+            |_, _, previous: Option<&usize>, _| {
                 let i = starts.len();
                 starts.push(previous.copied());
                 // Calls: 0 rest; 1 warm (fails), 1 rest; 2 warm (fails), 2 rest (fails); 3 warm.
