@@ -38,8 +38,9 @@ use crate::sim::{solve_from_rest, SolveParams, Workspace};
 
 // 1: first version. 2: the landmark-space method beside the network. 3: the landmark fit
 // corrected through the nonlinear face (`inversion.refinements` times). 4: the renders' neck
-// runs 6.5 cm below the chin onto shoulders.
-const PHOTOS_VERSION: u32 = 4;
+// runs 6.5 cm below the chin onto shoulders. 5: the landmark fit by projected Newton, its
+// corrections solved warm at a loosened tolerance.
+const PHOTOS_VERSION: u32 = 5;
 
 /// The transfer methods, in table order.
 pub const METHODS: [&str; 2] = ["network", "landmarks"];

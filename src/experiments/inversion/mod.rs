@@ -261,8 +261,8 @@ impl<'a> Inverter<'a> {
 }
 
 /// How much looser than the caller's the tolerance of [`Inverter::landmarks_refined`]'s
-/// solves is: a relative residual of 1e-3 where the transfer solves to 1e-4 moves the
-/// landmarks by far less than the fit's residual.
+/// solves is: their faces only estimate the basis' defect and rank the iterates, and the
+/// kept activations are solved again at the caller's tolerance by whoever takes them.
 const CORRECTION_LOOSENING: f64 = 10.0;
 
 /// What [`Inverter::landmarks_refined`] found: the kept activations and the landmark RMS
