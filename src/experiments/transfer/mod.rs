@@ -11,16 +11,17 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use image::RgbImage;
 
+mod fit;
 mod neck;
+
+pub use fit::Fitted;
+use fit::{landmark_fit, openface_fit};
 
 pub(crate) use neck::follow;
 use neck::{drive_neck, neck_weights, no_neck_controller};
 
-use rayon::prelude::*;
-
 use super::face::FaceSource;
 use super::fidelity::{Fidelity, JudgeFrames};
-use super::inversion::Inverter;
 use super::observe::model_observer;
 use super::table2::{au_mse, predict_activations};
 use crate::headneck::{face_motion, posed_face};
@@ -33,9 +34,7 @@ use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{gif_bytes, side_by_side};
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
-use crate::sim::basis::LinearBasis;
 use crate::sim::controls::control_names;
-use crate::sim::solver::solve_predicted;
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 
 #[derive(Clone, Debug)]
@@ -66,17 +65,6 @@ pub struct TransferOptions {
     /// landmark-space fit), each with its face already solved; `None`: the network's, from
     /// the AUs.
     pub fitted: Option<Vec<Option<Fitted>>>,
-}
-
-/// A frame's activations found without the network, and their face, solved at the run's
-/// tolerance. Each such frame is a function of its own input, so the frames are solved in
-/// parallel and the transfer takes their faces as they are instead of solving again frame by
-/// frame (fitted activations jump from frame to frame, which makes a warm-started chain slow).
-/// `state: None`: the face did not solve there, and the transfer tries it in its own way.
-#[derive(Clone, Debug)]
-pub struct Fitted {
-    pub activations: Activations,
-    pub state: Option<crate::sim::State>,
 }
 
 /// How a picture's expression becomes activations.
@@ -600,83 +588,6 @@ pub fn transfer_path(
     written.append(&mut summary.written);
     summary.written = written;
     Ok((summary, Some(landmarked)))
-}
-
-/// The landmark-space fit of every used row of an OpenFace file with 3D landmarks, against
-/// the file's own neutral face (the per-landmark median of its rows), indexed by `frame - 1`.
-fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Fitted>>> {
-    use super::observe::{camera_faces, median_face, read_observable};
-    let file = read_observable(input).context("--method landmarks fits the file's 3D landmarks")?;
-    let spec = run_spec(run)?;
-    let model = FaceSource::of_spec(&spec).model()?;
-    let calibration = super::cell::spec_calibration(&spec)?;
-    let faces = camera_faces(&file);
-    let observer = crate::observe::Observer::new(&median_face(&faces), calibration.clone())
-        .with_context(|| format!("{}: the neutral face", input.display()))?;
-    let frames = file.rows.iter().map(|r| r.frame).max().unwrap_or(0).max(0) as usize;
-    let mut displacements = vec![None; frames];
-    for (r, face) in file.rows.iter().zip(&faces) {
-        if r.frame < 1 {
-            continue;
-        }
-        let d = observer
-            .displacements(face)
-            .with_context(|| format!("{}:{}", input.display(), r.line))?;
-        displacements[r.frame as usize - 1] = Some(super::inversion::flat(&d));
-    }
-    landmark_fit(&spec, &model, &calibration, &displacements)
-}
-
-/// The landmark-space fit of each frame's landmark displacements (`None`: no face): the
-/// inversion table's `Inverter` on the linear basis of `model`, built at the spec's solver
-/// tolerance, corrected `inversion.refinements` times through the nonlinear face
-/// ([`Inverter::landmarks_refined`]); the frames are fitted in parallel (each fit is a
-/// function of its frame alone).
-fn landmark_fit(
-    spec: &crate::spec::Spec,
-    model: &crate::sim::FaceModel,
-    calibration: &crate::observe::Calibration,
-    displacements: &[Option<Vec<f64>>],
-) -> Result<Vec<Option<Fitted>>> {
-    let params = SolveParams {
-        tolerance: spec.dataset.tolerance,
-        ..SolveParams::default()
-    };
-    let basis = LinearBasis::build(model, &params)
-        .context("the linear basis for the landmark-space fit")?;
-    let inverter = Inverter::new(model, &basis, calibration)?;
-    let refinements = spec.inversion.refinements;
-    displacements
-        .par_iter()
-        .enumerate()
-        .map_init(
-            || Workspace::new(model),
-            |ws, (i, d)| {
-                let Some(d) = d else { return Ok(None) };
-                let ws = ws.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
-                let fit = inverter
-                    .landmarks_refined(d, refinements, ws, &params)
-                    .with_context(|| format!("frame {}: the landmark fit's face", i + 1))?;
-                // The kept face, solved at the loosened tolerance, is a near start for the
-                // full one; where that fails, the basis prediction.
-                let a = fit.activations;
-                let near = fit.state.and_then(|mut state| {
-                    solve(model, &a, &mut state, ws, &params)
-                        .ok()
-                        .map(|_| state)
-                });
-                let state = near.or_else(|| {
-                    solve_predicted(model, &basis, &a, ws, &params)
-                        .ok()
-                        .map(|r| r.0)
-                });
-                Ok(Some(Fitted {
-                    activations: a,
-                    state,
-                }))
-            },
-        )
-        .collect()
 }
 
 /// A line of a transfer's `mse.csv`: an AU (or `mean`) and its MSE against the input.
