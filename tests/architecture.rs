@@ -134,38 +134,58 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// Every module's imports from the crate and external crates in the source folder `src`
-/// (the binary's own files and test code left out), as `(module, target)` with external
-/// crates as `extern <name>`.
-fn used(src: &Path) -> BTreeSet<(String, String)> {
+/// A library file of `src` (the binary's own `main.rs`, `lib.rs` and its clap structs in
+/// `cli.rs` left out, which may use anything): its path under `src`, its top-level module,
+/// and its code without comments and test module (`None` for a module's tests in their own
+/// file, `#[cfg(test)] mod tests;`, which is test code).
+struct LibraryFile {
+    rel: PathBuf,
+    module: String,
+    code: Option<String>,
+}
+
+fn library_files(src: &Path) -> Vec<LibraryFile> {
     let mut files = Vec::new();
     rust_files(src, &mut files);
+    files.sort();
+    files
+        .into_iter()
+        .filter_map(|file| {
+            let rel = file.strip_prefix(src).unwrap().to_path_buf();
+            let module = rel
+                .components()
+                .next()
+                .unwrap()
+                .as_os_str()
+                .to_string_lossy()
+                .trim_end_matches(".rs")
+                .to_string();
+            if module == "main" || module == "lib" || module == "cli" {
+                return None;
+            }
+            let code = file
+                .file_name()
+                .is_none_or(|n| n != "tests.rs")
+                .then(|| library_code(&std::fs::read_to_string(&file).unwrap()));
+            Some(LibraryFile { rel, module, code })
+        })
+        .collect()
+}
+
+/// Every module's imports from the crate and external crates in the source folder `src`
+/// (test code left out), as `(module, target)` with external crates as `extern <name>`.
+fn used(src: &Path) -> BTreeSet<(String, String)> {
     let mut edges = BTreeSet::new();
-    for file in files {
-        let rel = file.strip_prefix(src).unwrap();
-        let module = rel
-            .components()
-            .next()
-            .unwrap()
-            .as_os_str()
-            .to_string_lossy()
-            .trim_end_matches(".rs")
-            .to_string();
-        if module == "main" || module == "lib" || module == "cli" {
-            continue;
-        }
-        if file.file_name().is_some_and(|n| n == "tests.rs") {
-            continue;
-        }
-        let code = library_code(&std::fs::read_to_string(&file).unwrap());
+    for f in library_files(src) {
+        let Some(code) = f.code else { continue };
         for target in crate_paths(&code) {
-            if target != module {
-                edges.insert((module.clone(), target));
+            if target != f.module {
+                edges.insert((f.module.clone(), target));
             }
         }
         for (krate, _) in EXTERNAL {
             if code.contains(&format!("{krate}::")) {
-                edges.insert((module.clone(), format!("extern {krate}")));
+                edges.insert((f.module.clone(), format!("extern {krate}")));
             }
         }
     }
@@ -197,24 +217,8 @@ fn unused_rules(src: &Path) -> Vec<String> {
 /// Every forbidden import in the source folder `src`, as "file: module -> what".
 fn violations(src: &Path) -> Vec<String> {
     let allowed: BTreeMap<&str, &[&str]> = ALLOWED.iter().copied().collect();
-    let mut files = Vec::new();
-    rust_files(src, &mut files);
-    files.sort();
     let mut found = Vec::new();
-    for file in files {
-        let rel = file.strip_prefix(src).unwrap();
-        let module = rel
-            .components()
-            .next()
-            .unwrap()
-            .as_os_str()
-            .to_string_lossy()
-            .trim_end_matches(".rs")
-            .to_string();
-        // The binary's own files (`main.rs`, its clap structs in `cli.rs`) may use anything.
-        if module == "main" || module == "lib" || module == "cli" {
-            continue;
-        }
+    for LibraryFile { rel, module, code } in library_files(src) {
         let Some(may) = allowed.get(module.as_str()) else {
             found.push(format!(
                 "{}: module `{module}` has no rule in tests/architecture.rs",
@@ -222,11 +226,7 @@ fn violations(src: &Path) -> Vec<String> {
             ));
             continue;
         };
-        // A module's tests in their own file (`#[cfg(test)] mod tests;`) are test code.
-        if file.file_name().is_some_and(|n| n == "tests.rs") {
-            continue;
-        }
-        let code = library_code(&std::fs::read_to_string(&file).unwrap());
+        let Some(code) = code else { continue };
         for target in crate_paths(&code) {
             if target != module && !may.contains(&target.as_str()) {
                 found.push(format!("{}: {module} -> {target}", rel.display()));

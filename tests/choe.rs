@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use facelab::experiments::inversion::Inverter;
-use facelab::invert::{accelerated, projected_gradient, Bound, BoxQp};
+use facelab::invert::{accelerated, projected_gradient, projected_newton, Bound, BoxQp};
 use facelab::io::calibration::{default_calibration_path, read_calibration};
 use facelab::observe::landmarks;
 use facelab::sim::basis::LinearBasis;
@@ -37,6 +37,20 @@ fn known() -> (Activations, Vec<f64>) {
     (a, x)
 }
 
+/// The landmark displacements of the nonlinear face for `a`, solved from rest (the target a
+/// landmark fit takes, flattened).
+fn solved_displacements(inv: &Inverter, a: &Activations, ws: &mut Workspace) -> Vec<f64> {
+    let (state, _) = solve_from_rest(crate::model(), a, ws, &SolveParams::default()).unwrap();
+    let l = landmarks(state.surface(crate::model().vertex_count()));
+    inv.observer
+        .displacements(&l)
+        .unwrap()
+        .iter()
+        .flatten()
+        .copied()
+        .collect()
+}
+
 #[test]
 fn landmark_inversion_recovers_the_models_own_activations() {
     let inv = inverter();
@@ -63,16 +77,7 @@ fn landmark_inversion_recovers_the_models_own_activations() {
 
     // From the nonlinear face: the basis is an approximation, so the fit is too.
     let mut ws = Workspace::new(crate::model()).unwrap();
-    let (state, _) = solve_from_rest(crate::model(), &a, &mut ws, &SolveParams::default()).unwrap();
-    let l = landmarks(state.surface(crate::model().vertex_count()));
-    let d: Vec<f64> = inv
-        .observer
-        .displacements(&l)
-        .unwrap()
-        .iter()
-        .flatten()
-        .copied()
-        .collect();
+    let d = solved_displacements(&inv, &a, &mut ws);
     let (got, _) = inv.landmarks_pg(&d);
     let (_, solved) = inv.solve(&got, &mut ws, &SolveParams::default()).unwrap();
     let rms = (solved
@@ -244,16 +249,7 @@ fn correcting_the_landmark_fit_through_the_face_brings_its_landmarks_closer() {
     let a = weights.sample(facelab::sim::expression::Expression::Joy, 1.0, 0.4);
     let params = SolveParams::default();
     let mut ws = Workspace::new(crate::model()).unwrap();
-    let (state, _) = solve_from_rest(crate::model(), &a, &mut ws, &params).unwrap();
-    let l = landmarks(state.surface(crate::model().vertex_count()));
-    let d: Vec<f64> = inv
-        .observer
-        .displacements(&l)
-        .unwrap()
-        .iter()
-        .flatten()
-        .copied()
-        .collect();
+    let d = solved_displacements(&inv, &a, &mut ws);
     let plain = inv.landmarks_refined(&d, 0, &mut ws, &params).unwrap();
     assert!(plain.rms.is_none() && plain.state.is_none());
     let refined = inv.landmarks_refined(&d, 2, &mut ws, &params).unwrap();
@@ -272,4 +268,13 @@ fn correcting_the_landmark_fit_through_the_face_brings_its_landmarks_closer() {
         .map(|(p, q)| (p - q).abs())
         .fold(0.0, f64::max);
     assert!(gap < 0.05, "projected Newton and FISTA differ by {gap}");
+    // Projected Newton meets the landmark fits' stationarity test within its 200 iterations.
+    let qp = BoxQp::least_squares(&inv.columns, &d);
+    let newton = projected_newton(&qp, &vec![0.0; qp.n], 1e-6, 200);
+    let fista = projected_gradient(&qp, &vec![0.0; qp.n], 1e-6, 20_000);
+    println!(
+        "box fit: projected Newton {} iterations, FISTA {}",
+        newton.iterations, fista.iterations
+    );
+    assert!(newton.converged, "{} iterations", newton.iterations);
 }
