@@ -134,8 +134,9 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// A library file of `src` (the binary's own `main.rs`, `lib.rs` and its clap structs in
-/// `cli.rs` left out, which may use anything): its path under `src`, its top-level module,
+/// A library file of `src` (`lib.rs` and the binary, `bin/facelab/`: its `main.rs`, its clap
+/// structs in `cli.rs` and one file per command in `commands/`, left out, which may use
+/// anything of the library): its path under `src`, its top-level module,
 /// and its code without comments and test module (`None` for a module's tests in their own
 /// file, `#[cfg(test)] mod tests;`, which is test code).
 struct LibraryFile {
@@ -160,7 +161,7 @@ fn library_files(src: &Path) -> Vec<LibraryFile> {
                 .to_string_lossy()
                 .trim_end_matches(".rs")
                 .to_string();
-            if module == "main" || module == "lib" || module == "cli" {
+            if module == "lib" || module == "bin" {
                 return None;
             }
             let code = file
@@ -341,4 +342,48 @@ fn no_source_file_is_over_700_lines() {
         })
         .collect();
     assert!(long.is_empty(), "{}", long.join("\n"));
+}
+
+/// The command line is a dispatcher: `main.rs` at most 150 lines, and every subcommand of
+/// `cli.rs`'s `Command` handled by its own file in `commands/` (`Command::Render(args) =>
+/// commands::render::run(args)`), so a command's code is found by its name.
+#[test]
+fn main_dispatches_each_command_to_its_own_file() {
+    let bin = crate::root().join("src/bin/facelab");
+    let main = std::fs::read_to_string(bin.join("main.rs")).unwrap();
+    assert!(
+        main.lines().count() <= 150,
+        "main.rs has {} lines",
+        main.lines().count()
+    );
+    let cli = std::fs::read_to_string(bin.join("cli.rs")).unwrap();
+    let enum_body = cli
+        .split("pub enum Command {")
+        .nth(1)
+        .and_then(|rest| rest.split("\n}\n").next())
+        .expect("cli.rs defines `pub enum Command`");
+    let variants: Vec<&str> = enum_body
+        .lines()
+        .filter_map(|l| {
+            let l = l.strip_prefix("    ")?;
+            let name: &str = l.split(['(', ' ', ',']).next()?;
+            (name.starts_with(|c: char| c.is_ascii_uppercase())
+                && name.chars().all(|c| c.is_ascii_alphanumeric()))
+            .then_some(name)
+        })
+        .collect();
+    assert!(variants.len() >= 10, "commands found: {variants:?}");
+    let missing: Vec<String> = variants
+        .iter()
+        .filter_map(|v| {
+            let file = v.to_lowercase();
+            let dispatched = main.contains(&format!("commands::{file}::run("));
+            let exists = bin.join("commands").join(format!("{file}.rs")).is_file();
+            (!(dispatched && exists)).then(|| format!("{v} (commands/{file}.rs)"))
+        })
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "not dispatched to their own file: {missing:?}"
+    );
 }

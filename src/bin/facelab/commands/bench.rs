@@ -1,0 +1,59 @@
+//! `facelab bench ...`: the benchmarks (run with --release), each printing its numbers and how
+//! they were measured.
+
+use facelab::experiments::bench::{
+    bench_landmark, bench_neck, bench_observe, bench_solve, bench_train, bench_transfer,
+};
+use facelab::sim::SolveParams;
+
+use super::set_threads;
+use crate::cli::Bench;
+
+pub fn run(what: Bench) -> anyhow::Result<()> {
+    let out = &mut std::io::stdout().lock();
+    match what {
+        Bench::Landmark {
+            frames,
+            seconds,
+            threads,
+        } => {
+            set_threads(Some(threads))?;
+            bench_landmark(frames, seconds, out)
+        }
+        Bench::Train {
+            pairs,
+            epochs,
+            export,
+            threads,
+        } => {
+            set_threads(Some(threads))?;
+            bench_train(pairs, epochs, export.as_deref(), out)
+        }
+        Bench::Transfer { model, clips } => {
+            set_threads(Some(1))?;
+            bench_transfer(&model, clips, out)
+        }
+        Bench::Neck { seconds } => {
+            set_threads(Some(1))?;
+            bench_neck(seconds, out)
+        }
+        Bench::Observe { frames } => bench_observe(frames, out),
+        Bench::Solve {
+            face,
+            samples,
+            seed,
+            levels,
+            tolerance,
+        } => bench_solve(
+            &face.source(),
+            &levels,
+            samples,
+            seed,
+            &SolveParams {
+                tolerance,
+                ..SolveParams::default()
+            },
+            out,
+        ),
+    }
+}

@@ -1,0 +1,21 @@
+//! `facelab edit`: activation curves edited by keyframes (Choe et al.'s displacement map).
+
+use facelab::experiments::editing::edit_file;
+
+use crate::cli::EditArgs;
+
+pub fn run(args: EditArgs) -> anyhow::Result<()> {
+    let written = edit_file(
+        &args.curves,
+        &args.keys,
+        args.knot_spacing,
+        &args.out,
+        args.figure
+            .as_deref()
+            .map(|f| (f, args.figure_spacings.as_slice())),
+    )?;
+    for p in written {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}

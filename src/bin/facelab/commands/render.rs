@@ -1,0 +1,22 @@
+//! `facelab render`: one face, posed and rendered.
+
+use facelab::experiments::face::render_to;
+use facelab::report::render::{Camera, RenderOptions};
+
+use crate::cli::{RenderArgs, View};
+
+pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    let request = args.pose.request()?;
+    let options = RenderOptions {
+        width: args.width,
+        height: args.height,
+        camera: match args.view {
+            View::Frontal => Camera::frontal(),
+            View::ThreeQuarter => Camera::three_quarter(),
+        },
+        muscle_overlay: args.overlay,
+    };
+    render_to(&args.face.source(), &request, &options, &args.out)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}

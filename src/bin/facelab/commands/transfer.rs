@@ -1,0 +1,85 @@
+//! `facelab transfer`: a picture, a clip or an OpenFace file onto the face, with the judge's
+//! verdict.
+
+use facelab::experiments::table2::FLAT_SPREAD;
+use facelab::experiments::transfer::{transfer_path, TransferMethod, TransferOptions};
+use facelab::learn::Normalization;
+use facelab::observe::AU_NAMES;
+
+use super::{data_arg, photo_neutral, print_landmarked};
+use crate::cli::TransferArgs;
+
+pub fn run(args: TransferArgs) -> anyhow::Result<()> {
+    let input = args
+        .input
+        .or(args.openface)
+        .expect("clap requires an input");
+    let (model, neck) = (data_arg(args.model), args.neck.map(data_arg));
+    let (summary, landmarked) = transfer_path(
+        &input,
+        &TransferOptions {
+            openface: input.clone(),
+            model,
+            normalize: Normalization::None,
+            out: args.out,
+            render_frames: args.frames,
+            ignore_pose: args.ignore_pose,
+            neck,
+            pictures: None,
+            openface_bytes: None,
+            input_blendshapes: None,
+            judge: !args.no_judge,
+            fitted: None,
+        },
+        args.normalize
+            .map(|n| Normalization::parse(&n).expect("clap checked")),
+        args.neutral.as_deref().map(photo_neutral),
+        args.method
+            .as_deref()
+            .map(|m| TransferMethod::parse(m).expect("clap checked")),
+    )?;
+    if let Some(l) = &landmarked {
+        print_landmarked(l);
+    }
+    if !summary.flat.is_empty() {
+        let names: Vec<&str> = summary.flat.iter().map(|&k| AU_NAMES[k]).collect();
+        println!(
+            "normalization: {} of {} AUs barely vary across the {} frame(s) (spread < \
+             {FLAT_SPREAD} AU) and keep their own reading: {}",
+            names.len(),
+            AU_NAMES.len(),
+            summary.rows,
+            names.join(" ")
+        );
+    }
+    if let Some((rms, max)) = summary.pose_error {
+        println!("head pose through the neck: RMS error {rms:.2} deg, max {max:.2} deg");
+    }
+    if !summary.unsolved.is_empty() {
+        eprintln!(
+            "warning: {} of {} frames did not converge and are written with success = 0, left \
+             out of the scores: {}",
+            summary.unsolved.len(),
+            summary.rows,
+            summary.unsolved.join("; ")
+        );
+    }
+    if let Some(f) = &summary.fidelity {
+        for line in &f.summary {
+            println!("{line}");
+        }
+    }
+    println!(
+        "{} frames transferred, {} skipped (success = 0); AU MSE mean {:.4}",
+        summary.rows,
+        summary.skipped,
+        summary.mean()
+    );
+    for (a, m) in AU_NAMES.iter().zip(&summary.mse) {
+        println!("{a} {m:.4}");
+    }
+    for p in &summary.written {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
