@@ -28,6 +28,7 @@ pub mod learn;
 pub mod observe;
 pub mod report;
 pub mod rng;
+pub mod run;
 pub mod sim;
 pub mod spec;
 pub mod stats;

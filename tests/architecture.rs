@@ -35,10 +35,16 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("report", &["sim", "observe"]),
     ("judge", &["sim", "landmark", "report", "stats"]),
     (
+        "run",
+        &[
+            "sim", "observe", "learn", "io", "dataset", "rng", "spec", "cache",
+        ],
+    ),
+    (
         "experiments",
         &[
             "sim", "observe", "learn", "cohort", "landmark", "io", "dataset", "headneck", "invert",
-            "rng", "stats", "edit", "spec", "cache", "report", "judge",
+            "rng", "stats", "edit", "spec", "cache", "report", "judge", "run",
         ],
     ),
 ];
@@ -51,7 +57,7 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("candle_core", &["learn", "landmark"]),
     ("candle_nn", &["learn"]),
     ("image", &["io", "report", "experiments"]),
-    ("indicatif", &["experiments"]),
+    ("indicatif", &["run"]),
 ];
 
 /// The first path segment after `crate::` of every path in `code`, including the members of

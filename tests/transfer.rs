@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 
 use facelab::cohort::{clips, CohortKind, CohortParams, Subject, SubjectParams};
 use facelab::dataset::reader::{FaceReader, Source};
-use facelab::experiments::face::FaceSource;
 use facelab::experiments::observe::model_observer;
 use facelab::experiments::table2::{au_mse, observe_clip, transfer};
+use facelab::io::face::FaceSource;
 use facelab::io::observer_fit::read_any_calibration;
 use facelab::learn::Mlp;
 use facelab::observe::Calibration;

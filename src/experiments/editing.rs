@@ -130,7 +130,7 @@ pub fn retarget(input: &Path, subjects: usize, frames: &[f64], out: &Path) -> Re
         }
     }
     let spec = crate::spec::load(&crate::io::data_path("experiments/base.toml"), &[])?.remove(0);
-    let source = super::face::FaceSource::default();
+    let source = crate::io::face::FaceSource::default();
     let (mesh, weights) = (source.mesh()?, source.weights()?);
     let mut faces = vec![("base model".to_string(), source.model()?)];
     for i in 0..subjects {

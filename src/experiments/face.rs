@@ -7,8 +7,7 @@ use anyhow::{bail, Context, Result};
 
 use crate::io::atomic::write_atomic;
 use crate::io::expressions::controls_activations;
-use crate::io::expressions::{default_expressions_path, read_expressions};
-use crate::io::mesh::{default_mesh_path, read_obj};
+use crate::io::face::FaceSource;
 use crate::io::reach::{default_reach_path, read_reach};
 use crate::judge::{groups, Judge, Reading, GROUPS, GROUP_LABELS};
 use crate::landmark::{Blendshapes, BLENDSHAPE_NAMES};
@@ -20,74 +19,7 @@ use crate::report::save_png;
 use crate::sim::controls::{control_names, JAW_ROTATION};
 use crate::sim::expression::{Expression, ExpressionWeights};
 use crate::sim::validity::defects;
-use crate::sim::{
-    solve_from_rest, Activations, FaceModel, FaceParams, Mesh, SolveParams, State, Workspace,
-};
-
-/// Where the face comes from.
-#[derive(Clone, Debug, Default)]
-pub struct FaceSource {
-    /// OBJ mesh; default `assets/face/canonical_face.obj`.
-    pub mesh: Option<PathBuf>,
-    /// Expression weights; default `experiments/expressions.csv`.
-    pub expressions: Option<PathBuf>,
-    pub subdivisions: u8,
-    /// `TissueParams::shear_modulus_fraction`; default that field's default.
-    pub shear_modulus_fraction: Option<f64>,
-}
-
-impl FaceSource {
-    /// The default mesh and weights with the face keys of a spec's `[dataset]`.
-    pub fn of_spec(spec: &crate::spec::Spec) -> FaceSource {
-        FaceSource {
-            subdivisions: spec.dataset.subdivisions,
-            shear_modulus_fraction: Some(spec.dataset.shear_modulus_fraction),
-            ..FaceSource::default()
-        }
-    }
-
-    pub fn model(&self) -> Result<FaceModel> {
-        if let Some(f) = self.shear_modulus_fraction {
-            if !(f.is_finite() && f >= 0.0) {
-                bail!("--shear-modulus-fraction must be a finite number >= 0, got {f}");
-            }
-        }
-        FaceModel::new(&self.mesh()?, self.params()).with_context(|| {
-            format!(
-                "{}: cannot build the face model",
-                self.mesh_path().display()
-            )
-        })
-    }
-
-    fn mesh_path(&self) -> PathBuf {
-        self.mesh.clone().unwrap_or_else(default_mesh_path)
-    }
-
-    /// The base mesh (before subdivision, m).
-    pub fn mesh(&self) -> Result<Mesh> {
-        Ok(read_obj(&self.mesh_path())?)
-    }
-
-    pub fn params(&self) -> FaceParams {
-        let mut params = FaceParams {
-            subdivisions: self.subdivisions,
-            ..FaceParams::default()
-        };
-        if let Some(f) = self.shear_modulus_fraction {
-            params.tissue.shear_modulus_fraction = f;
-        }
-        params
-    }
-
-    pub fn weights(&self) -> Result<ExpressionWeights> {
-        let path = self
-            .expressions
-            .clone()
-            .unwrap_or_else(default_expressions_path);
-        Ok(read_expressions(&path)?)
-    }
-}
+use crate::sim::{solve_from_rest, Activations, FaceModel, SolveParams, State, Workspace};
 
 /// What to pose: an expression at a scale, then individual overrides.
 #[derive(Clone, Debug, Default)]

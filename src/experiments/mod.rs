@@ -1,7 +1,6 @@
 //! The harness: commands that put the simulator, the observer and the reports together.
 
 pub mod bench;
-pub mod cell;
 pub mod editing;
 pub mod face;
 pub mod fidelity;
@@ -13,20 +12,18 @@ pub mod photos;
 pub mod pose_transfer;
 pub mod reach;
 pub mod realfaces;
-pub mod run;
-pub mod stage;
 pub mod table1;
 pub mod table2;
 pub mod table2_stage;
 pub mod transfer;
 
-use cell::Experiment;
+use crate::run::cell::{Experiment, Registry};
 
 /// Every experiment a run can hold, in the order a cell runs them: an experiment comes after
 /// those whose products it reads (the inversion and the pose transfer read Table 2's cohorts,
 /// the pose transfer the head-neck experiment's voluntary network). A new experiment is a
 /// new file and a line here.
-pub(crate) const EXPERIMENTS: &[&dyn Experiment] = &[
+const EXPERIMENTS: &[&dyn Experiment] = &[
     &headpose::Headpose,
     &table1::Table1,
     &table2_stage::Table2,
@@ -35,6 +32,9 @@ pub(crate) const EXPERIMENTS: &[&dyn Experiment] = &[
     &realfaces::Realfaces,
     &photo_table::Photos,
 ];
+
+/// The registry a run is handed ([`crate::run::RunOptions::registry`]).
+pub const REGISTRY: Registry = Registry(EXPERIMENTS);
 
 #[cfg(test)]
 mod tests {

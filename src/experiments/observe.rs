@@ -6,8 +6,9 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 
-use super::face::{pose, FaceSource};
+use super::face::pose;
 use crate::io::calibration::{read_calibration, CalibrationTable};
+use crate::io::face::FaceSource;
 use crate::io::observer_fit::{read_readout_inputs, read_realdata};
 use crate::io::openface::{read_openface, write_openface, FaceRow, OpenFaceFile};
 use crate::observe::au::{Calibration, FittedReadout, Observation, Observer};

@@ -24,15 +24,15 @@ use super::photos::{
 };
 use super::table2::predict_activations;
 use crate::cache::{self, Entry};
-use crate::experiments::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::experiments::inversion::{flat, Inverter};
-use crate::experiments::stage::{text, Artifact, Unit};
 use crate::judge::{
     group_agreement, groups, verdict, Groups, Judge, Reading, ABSENT, GROUPS, GROUP_LABELS, SHOWN,
 };
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{png_bytes, side_by_side};
 use crate::report::render::{render, RenderOptions};
+use crate::run::cell::{spec_calibration, CellRun, Experiment, Plan};
+use crate::run::stage::{text, Artifact, Unit};
 use crate::sim::basis::LinearBasis;
 use crate::sim::{solve_from_rest, SolveParams, Workspace};
 

@@ -14,11 +14,11 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::face::FaceSource;
 use super::observe::model_observer;
 use crate::io::atomic::write_atomic;
 use crate::io::calibration::default_calibration_path;
 use crate::io::expressions::controls_activations;
+use crate::io::face::FaceSource;
 use crate::io::observer_fit::read_any_calibration;
 use crate::io::reach::{read_reach, Measure, ReachLine, ReachRow};
 use crate::io::rows::{self, CsvRow};

@@ -8,6 +8,7 @@ pub mod calibration;
 pub mod curves;
 pub mod embedded;
 pub mod expressions;
+pub mod face;
 pub mod facs;
 pub mod mesh;
 pub mod observer_fit;

@@ -4,7 +4,8 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
-use facelab::experiments::face::{parse_assignments, FaceSource, PoseRequest};
+use facelab::experiments::face::{parse_assignments, PoseRequest};
+use facelab::io::face::FaceSource;
 use facelab::sim::SolveParams;
 
 #[derive(Parser)]

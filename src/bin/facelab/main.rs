@@ -8,7 +8,7 @@ mod commands;
 use std::process::ExitCode;
 
 use clap::Parser;
-use facelab::experiments::stage::{set_verbosity, Verbosity};
+use facelab::run::stage::{set_verbosity, Verbosity};
 
 use cli::{Cli, Command};
 

@@ -1,6 +1,6 @@
 //! `facelab bench landmark`: detection, landmarks, fit and observer per frame, and a clip.
 
-use crate::experiments::face::FaceSource;
+use crate::io::face::FaceSource;
 use crate::observe::landmarks;
 use anyhow::{Context, Result};
 use std::io::Write;

@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 
-use crate::experiments::face::FaceSource;
+use crate::io::face::FaceSource;
 use crate::observe::landmarks;
 use crate::rng::stream;
 use crate::sim::expression::{Expression, ExpressionWeights};

@@ -1,6 +1,6 @@
 //! `facelab bench solve`: the face's equilibrium solves, cold, warm and from the basis.
 
-use crate::experiments::face::FaceSource;
+use crate::io::face::FaceSource;
 use crate::sim::basis::LinearBasis;
 use crate::sim::solver::{iteration_cost, softest_mode, solve_predicted, SoftMode};
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};

@@ -9,8 +9,6 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use crate::cache::Entry;
-use crate::experiments::cell::{self, CellRun, Experiment, Plan, Trained};
-use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::headneck::{
     dataset, face_motion, posed_face, sequences, static_targets, Learned, INPUTS, OUTPUTS,
 };
@@ -20,6 +18,8 @@ use crate::report::compose::{labelled_grid, png_bytes};
 use crate::report::figures::{line_panels, Panel, XySeries, PALETTE};
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::rng::stream;
+use crate::run::cell::{self, CellRun, Experiment, Plan, Trained};
+use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::neck::{simulate, BodyState, HeadPose, Neck, PoseSequence, Teacher, Voluntary};
 use crate::sim::FaceModel;
 

@@ -5,10 +5,10 @@ use anyhow::{bail, Result};
 
 use super::{Output, SequenceRow, StaticRow};
 use crate::cache::Entry;
-use crate::experiments::stage::{text, Artifact};
 use crate::headneck::{INPUTS, OUTPUTS, STRAIN_SCALE};
 use crate::io::rows::{self, num, CsvRow};
 use crate::report::table::{Table, TableRow};
+use crate::run::stage::{text, Artifact};
 use crate::sim::geom::V3;
 use crate::sim::neck::{HeadPose, Trajectory};
 

@@ -28,8 +28,6 @@ use rayon::prelude::*;
 
 use crate::cache::Entry;
 use crate::cohort::{CohortKind, CohortParams, Subject};
-use crate::experiments::cell::{spec_calibration, CellRun, Experiment, Plan};
-use crate::experiments::stage::{text, Artifact, Stages, Unit};
 use crate::experiments::table2::{predict_activations, range_map, training_range, RefFrame};
 use crate::experiments::table2_stage::{planned_cohort, Table2Result};
 use crate::invert::{au_fit, Bound, InversionParams};
@@ -37,6 +35,8 @@ use crate::learn::{Mlp, Normalization};
 use crate::observe::au::AU_MAX;
 use crate::observe::{landmarks, Calibration, AU_COUNT, LANDMARK_COUNT};
 use crate::rng::stream;
+use crate::run::cell::{spec_calibration, CellRun, Experiment, Plan};
+use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::expression::ExpressionWeights;
 use crate::sim::{solve_from_rest, Activations, FaceParams, Mesh, SolveParams, Workspace};
 
@@ -461,7 +461,7 @@ impl Experiment for Inversion {
             k.dataset.as_str(),
         ];
         keys.extend(k.basis.as_deref());
-        let source = crate::experiments::face::FaceSource::of_spec(spec);
+        let source = spec.face_source();
         let out = stage(
             spec,
             &source,
@@ -493,7 +493,7 @@ pub fn unit(spec: &crate::spec::Spec, inputs: &[&str]) -> Unit {
 #[allow(clippy::too_many_arguments)]
 pub fn stage(
     spec: &crate::spec::Spec,
-    source: &crate::experiments::face::FaceSource,
+    source: &crate::io::face::FaceSource,
     stages: &mut Stages,
     inputs: &[&str],
     inverter: &Inverter,

@@ -2,11 +2,12 @@
 //! writes whatever the spec's tables: `table1.csv` and `curves.csv` in the run folder, a
 //! sweep's Table 1 summary across its cells.
 
-use crate::experiments::cell::{CellRun, Experiment, Networks, Plan, Sweep, Table1Rows};
-use crate::experiments::table1::{self, Network, Row};
+use crate::experiments::table1;
 use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Curves;
 use crate::report::table::{Table, TableRow};
+use crate::run::cell::networks::{Network, Row, ORDER};
+use crate::run::cell::{CellRun, Experiment, Networks, Plan, Sweep};
 use crate::spec::Spec;
 use crate::stats;
 use anyhow::Result;
@@ -36,12 +37,26 @@ impl Experiment for Table1 {
         }
         Ok(())
     }
+
+    fn finish_cell(&self, cx: &mut CellRun) -> Result<()> {
+        match cx.trained() {
+            Some(n) => record(cx, &n),
+            None => Ok(()),
+        }
+    }
+
+    fn sweep(&self, sweep: &mut Sweep) -> Result<()> {
+        sweep_record(sweep)
+    }
 }
+
+/// A cell's Table 1 rows, kept for the sweep's summary.
+struct Table1Rows(Vec<Row>);
 
 /// What every cell that trained writes, whichever tables it has: each seed's held-out test of
 /// every network (`table1.csv`), the learning curves, and, for a single-cell spec, the first
 /// seed's unified network and the training AUs' statistics (`facelab transfer --model`).
-pub(crate) fn record(cx: &mut CellRun, n: &Networks) -> Result<()> {
+fn record(cx: &mut CellRun, n: &Networks) -> Result<()> {
     cx.output("table1.csv", table1_csv(&n.rows))?;
     cx.output("curves.csv", all_curves_csv(&n.curves))?;
     if cx.publishes() {
@@ -54,7 +69,7 @@ pub(crate) fn record(cx: &mut CellRun, n: &Networks) -> Result<()> {
 }
 
 /// A sweep's Table 1 over its cells: `<experiment>.csv`, the summary's first part, a figure.
-pub(crate) fn sweep_record(sweep: &mut Sweep) -> Result<()> {
+fn sweep_record(sweep: &mut Sweep) -> Result<()> {
     let rows: Vec<(String, Vec<Row>)> = sweep
         .each::<Table1Rows>()
         .into_iter()
@@ -148,7 +163,7 @@ struct Table1Line {
 
 impl CsvRow for Table1Line {
     fn header() -> Vec<String> {
-        let names = table1::ORDER.iter().map(|e| e.to_string());
+        let names = ORDER.iter().map(|e| e.to_string());
         std::iter::once("seed".to_string())
             .chain(names.clone())
             .chain(std::iter::once("all".to_string()))
@@ -246,7 +261,7 @@ fn table1_table(rows: &[Row]) -> Table {
     let (mean, ci, umean, uci) = summary(rows);
     let header = std::iter::once(String::new())
         .chain(
-            table1::ORDER
+            ORDER
                 .iter()
                 .map(|e| format!("MSE_{}", capitalize(e.name()))),
         )
@@ -327,7 +342,7 @@ fn table1_figures(dir: &Path, curves: &[((u64, Network), Curves)], rows: &[Row])
         &series,
     )?;
     let (mean, _, _, _) = summary(rows);
-    let cats: Vec<String> = table1::ORDER
+    let cats: Vec<String> = ORDER
         .iter()
         .map(|e| capitalize(e.name()))
         .chain(std::iter::once("All".into()))

@@ -13,17 +13,17 @@ use crate::cache::Entry;
 use crate::cohort::CohortKind;
 use crate::dataset::reader::FaceReader;
 use crate::dataset::Sample;
-use crate::experiments::cell::{self, spec_calibration, CellRun, Experiment, Plan, Sweep};
-use crate::experiments::face::FaceSource;
 use crate::experiments::realfaces;
-use crate::experiments::stage::{text, Artifact, Files, Stages, Unit};
 use crate::experiments::table2::{
     self, clip_count, clip_ranges, range_map, reference, reference_csv, reference_from_csv,
     training_range, transfer, transfers_csv, transfers_from_csv, RefFrame, Row, Setting,
     Transferred,
 };
+use crate::io::face::FaceSource;
 use crate::learn::Mlp;
 use crate::observe::{Calibration, AU_COUNT};
+use crate::run::cell::{self, spec_calibration, CellRun, Experiment, Plan, Sweep};
+use crate::run::stage::{text, Artifact, Files, Stages, Unit};
 use crate::sim::basis::LinearBasis;
 use crate::sim::{FaceModel, SolveParams};
 use crate::spec::Spec;
@@ -114,7 +114,7 @@ impl Experiment for Table2 {
         let calibration = spec_calibration(spec)?;
         let inputs = Inputs {
             spec,
-            source: &FaceSource::of_spec(spec),
+            source: &spec.face_source(),
             face: cx.assets.face.clone(),
             data: cx.assets.data(spec)?,
             dataset_key: &k.dataset,

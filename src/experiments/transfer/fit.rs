@@ -8,7 +8,6 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use super::run_spec;
-use crate::experiments::face::FaceSource;
 use crate::experiments::inversion::Inverter;
 use crate::sim::basis::LinearBasis;
 use crate::sim::solver::solve_predicted;
@@ -31,8 +30,8 @@ pub(super) fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Fitted
     use crate::experiments::observe::{camera_faces, median_face, read_observable};
     let file = read_observable(input).context("--method landmarks fits the file's 3D landmarks")?;
     let spec = run_spec(run)?;
-    let model = FaceSource::of_spec(&spec).model()?;
-    let calibration = crate::experiments::cell::spec_calibration(&spec)?;
+    let model = spec.face_source().model()?;
+    let calibration = crate::run::cell::spec_calibration(&spec)?;
     let faces = camera_faces(&file);
     let observer = crate::observe::Observer::new(&median_face(&faces), calibration.clone())
         .with_context(|| format!("{}: the neutral face", input.display()))?;

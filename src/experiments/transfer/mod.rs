@@ -20,7 +20,6 @@ use fit::{landmark_fit, openface_fit};
 pub(crate) use neck::follow;
 use neck::{drive_neck, neck_weights, no_neck_controller};
 
-use super::face::FaceSource;
 use super::fidelity::{Fidelity, JudgeFrames};
 use super::observe::model_observer;
 use super::table2::{au_mse, predict_activations};
@@ -239,9 +238,9 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         }
     };
 
-    let source = FaceSource::of_spec(&spec);
+    let source = spec.face_source();
     let model = source.model()?;
-    let observer = model_observer(&model, super::cell::spec_calibration(&spec)?)?;
+    let observer = model_observer(&model, crate::run::cell::spec_calibration(&spec)?)?;
     let params = SolveParams {
         tolerance: spec.dataset.tolerance,
         ..SolveParams::default()
@@ -561,8 +560,8 @@ pub fn transfer_path(
             ));
         }
     }
-    let model = FaceSource::of_spec(&spec).model()?;
-    let calibration = super::cell::spec_calibration(&spec)?;
+    let model = spec.face_source().model()?;
+    let calibration = crate::run::cell::spec_calibration(&spec)?;
     let mut landmarked = landmark_files(input, &opts.out, &model, calibration.clone(), neutral)?;
     let fitted = match method.unwrap_or_default() {
         TransferMethod::Network => None,
@@ -603,6 +602,7 @@ impl CsvRow for MseLine {}
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::face::FaceSource;
 
     /// A clip whose frame 1 fails from the previous frame but solves from rest, and whose
     /// frame 2 fails both ways: frame 2 alone is lost, named with both reasons, and frame 3

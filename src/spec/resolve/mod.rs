@@ -109,6 +109,15 @@ fn lookup<'a>(tree: &'a BTreeMap<String, Node>, key: &str) -> Option<&'a Node> {
 }
 
 impl Spec {
+    /// The default mesh and weights with the face keys of `[dataset]`.
+    pub fn face_source(&self) -> crate::io::face::FaceSource {
+        crate::io::face::FaceSource {
+            subdivisions: self.dataset.subdivisions,
+            shear_modulus_fraction: Some(self.dataset.shear_modulus_fraction),
+            ..Default::default()
+        }
+    }
+
     /// Whether faces are read with the readout fitted to OpenFace, so that the observer's
     /// AUs and a real file's are on the same scale.
     pub fn reads_on_openface_scale(&self) -> bool {

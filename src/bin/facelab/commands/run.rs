@@ -1,6 +1,7 @@
 //! `facelab run`: a spec's stages, locally or as Slurm job arrays.
 
-use facelab::experiments::run;
+use facelab::experiments::REGISTRY;
+use facelab::run;
 use facelab::spec::LauncherKind;
 
 use super::{data_arg, results_folder, set_threads};
@@ -16,6 +17,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         threads,
         publish: args.publish,
         assemble: args.assemble,
+        registry: REGISTRY,
     };
     let kind = run::launcher_of(&spec, &opts.sets, given)?;
     if kind == LauncherKind::Slurm && opts.assemble.is_none() {

@@ -1,13 +1,19 @@
 //! `facelab status`: which stages of a spec are cached, missing, damaged or queued.
 
-use facelab::experiments::run::{self, UnitState};
+use facelab::experiments::REGISTRY;
+use facelab::run::{self, UnitState};
 
 use super::{data_arg, results_folder};
 use crate::cli::StatusArgs;
 
 pub fn run(args: StatusArgs) -> anyhow::Result<()> {
     let results = results_folder(args.results);
-    let lines = run::status(&data_arg(args.spec.spec), &args.spec.sets, &results)?;
+    let lines = run::status(
+        &data_arg(args.spec.spec),
+        &args.spec.sets,
+        &results,
+        REGISTRY,
+    )?;
     let (mut cached, mut todo) = (0, 0);
     for line in &lines {
         let (state, note) = match &line.state {

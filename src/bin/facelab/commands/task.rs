@@ -1,12 +1,13 @@
 //! `facelab task` (hidden): one Slurm array task of a submitted run, its units into the cache.
 
-use facelab::experiments::run;
+use facelab::experiments::REGISTRY;
+use facelab::run;
 
 use super::set_threads;
 use crate::cli::TaskArgs;
 
 pub fn run(args: TaskArgs) -> anyhow::Result<()> {
     set_threads(None)?;
-    run::task(&args.launch, &args.array, args.index)?;
+    run::task(&args.launch, &args.array, args.index, REGISTRY)?;
     Ok(())
 }

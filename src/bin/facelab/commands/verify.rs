@@ -1,11 +1,13 @@
 //! `facelab verify`: a run recomputed in a temporary folder, its CSVs compared by hash.
 
+use facelab::experiments::REGISTRY;
+
 use super::set_threads;
 use crate::cli::VerifyArgs;
 
 pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
     let threads = set_threads(args.threads)?;
-    let differ = facelab::experiments::run::verify(&args.run_dir, threads)?;
+    let differ = facelab::run::verify(&args.run_dir, threads, REGISTRY)?;
     if differ.is_empty() {
         println!(
             "{}: every CSV reproduced byte for byte",

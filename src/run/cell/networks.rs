@@ -1,17 +1,21 @@
 //! The networks of a cell, which every table but the head-neck experiment reads: the basis,
 //! the dataset and the training stages through the cache, and each seed's held-out test
-//! (Table 1's rows, the record every training run writes).
+//! (Table 1's rows, the record every training run writes). Which networks there are (Zeng et
+//! al.'s six per-expression networks and the unified one), their pairs and the split are
+//! defined here, below every experiment that reads them.
 
 use crate::cache::Entry;
 use crate::dataset::reader::FaceReader;
 use crate::dataset::{self, Sample};
-use crate::experiments::face::FaceSource;
-use crate::experiments::stage::{text, Artifact, Stages, Unit};
-use crate::experiments::table1::{self, Network, Row};
+use crate::io::facs::FacsMaps;
 use crate::io::rows::{self, num, CsvRow};
-use crate::learn::{self, Curves, Mlp};
+use crate::learn::{self, Curves, Mlp, Pairs};
+use crate::observe::AU_COUNT;
 use crate::rng::stream;
+use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::basis::LinearBasis;
+use crate::sim::controls::CONTROL_COUNT;
+use crate::sim::expression::Expression;
 use crate::sim::geom::V3;
 use crate::sim::{FaceModel, SolveParams};
 use crate::spec::Spec;
@@ -215,7 +219,7 @@ impl Networks {
 /// The cell's dataset (its clean faces, then the detector's noise, cached apart so that a
 /// noise sweep solves the faces once) and every (seed, network) trained on it.
 pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -> Result<Networks> {
-    let source = FaceSource::of_spec(spec);
+    let source = spec.face_source();
     // Dataset (and the basis it starts from): the clean faces, then the detector's noise,
     // cached apart so that a noise sweep solves the faces once.
     let clean_key = k.clean_dataset.as_ref().unwrap_or(&k.dataset);
@@ -293,9 +297,8 @@ pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -
     let trained = learn::one_thread_each(|| {
         stages.get_or_compute_each(&units, |i| {
             let ((seed, network), _) = &k.train[i];
-            let split = table1::split(&samples, spec.dataset.test_fraction, *seed);
-            let (train_pairs, test_pairs) =
-                table1::network_pairs(*network, &samples, &split, &a.facs);
+            let split = split(&samples, spec.dataset.test_fraction, *seed);
+            let (train_pairs, test_pairs) = network_pairs(*network, &samples, &split, &a.facs);
             let mut rng = stream(*seed, &format!("train/{}", network.name()));
             let mut uniform = || rng.uniform();
             let (mlp, curves) = learn::train(
@@ -320,16 +323,180 @@ pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -
 
     let mut rows = Vec::new();
     for &seed in &spec.seeds {
-        let split = table1::split(&samples, spec.dataset.test_fraction, seed);
+        let split = split(&samples, spec.dataset.test_fraction, seed);
         let seed_nets: Vec<&Mlp> = Network::all().iter().map(|n| &nets[&(seed, *n)]).collect();
-        rows.push(table1::evaluate(
-            seed, &seed_nets, &samples, &split, &a.facs,
-        )?);
+        rows.push(evaluate(seed, &seed_nets, &samples, &split, &a.facs)?);
     }
     Ok(Networks {
         samples,
         nets,
         curves,
         rows,
+    })
+}
+
+/// The paper's column order.
+pub const ORDER: [Expression; 6] = [
+    Expression::Joy,
+    Expression::Sadness,
+    Expression::Fear,
+    Expression::Anger,
+    Expression::Surprise,
+    Expression::Disgust,
+];
+
+/// Which network.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Network {
+    Unified,
+    Expression(Expression),
+}
+
+impl Network {
+    pub fn all() -> Vec<Network> {
+        std::iter::once(Network::Unified)
+            .chain(ORDER.iter().map(|&e| Network::Expression(e)))
+            .collect()
+    }
+
+    pub fn name(self) -> String {
+        match self {
+            Network::Unified => "unified".into(),
+            Network::Expression(e) => e.to_string(),
+        }
+    }
+
+    /// Input AU indices and output control indices.
+    pub fn io(self, facs: &FacsMaps) -> (Vec<usize>, Vec<usize>) {
+        match self {
+            Network::Unified => ((0..AU_COUNT).collect(), (0..CONTROL_COUNT).collect()),
+            Network::Expression(e) => (
+                facs.expression_aus[e as usize].clone(),
+                facs.expression_controls(e),
+            ),
+        }
+    }
+}
+
+/// Per expression (`Expression::ALL` order): sample indices of the train and test splits.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Split {
+    pub train: Vec<Vec<usize>>,
+    pub test: Vec<Vec<usize>>,
+}
+
+/// Shuffles each expression's samples with `split/<expression>` of `seed` and holds out the
+/// last `test_fraction` (at least one pair).
+pub fn split(samples: &[Sample], test_fraction: f64, seed: u64) -> Split {
+    let mut train = Vec::new();
+    let mut test = Vec::new();
+    for e in Expression::ALL {
+        let mut idx: Vec<usize> = (0..samples.len())
+            .filter(|&i| samples[i].expression == e)
+            .collect();
+        let mut rng = stream(seed, &format!("split/{e}"));
+        for i in (1..idx.len()).rev() {
+            idx.swap(i, rng.index(i + 1));
+        }
+        let n_test = ((idx.len() as f64 * test_fraction).round() as usize).clamp(1, idx.len() - 1);
+        let cut = idx.len() - n_test;
+        test.push(idx[cut..].to_vec());
+        train.push(idx[..cut].to_vec());
+    }
+    Split { train, test }
+}
+
+/// Pairs of the chosen samples, AUs `inputs` -> controls `outputs`.
+pub fn pairs(samples: &[Sample], idx: &[usize], inputs: &[usize], outputs: &[usize]) -> Pairs {
+    let mut p = Pairs {
+        inputs: inputs.len(),
+        outputs: outputs.len(),
+        x: Vec::with_capacity(idx.len() * inputs.len()),
+        y: Vec::with_capacity(idx.len() * outputs.len()),
+    };
+    for &i in idx {
+        p.x.extend(inputs.iter().map(|&k| samples[i].aus[k] as f32));
+        p.y.extend(outputs.iter().map(|&k| samples[i].activations[k] as f32));
+    }
+    p
+}
+
+/// The train and test pairs of a network.
+pub fn network_pairs(
+    network: Network,
+    samples: &[Sample],
+    split: &Split,
+    facs: &FacsMaps,
+) -> (Pairs, Pairs) {
+    let (inputs, outputs) = network.io(facs);
+    let pick = |sets: &Vec<Vec<usize>>| -> Vec<usize> {
+        match network {
+            Network::Unified => sets.iter().flatten().copied().collect(),
+            Network::Expression(e) => sets[e as usize].clone(),
+        }
+    };
+    (
+        pairs(samples, &pick(&split.train), &inputs, &outputs),
+        pairs(samples, &pick(&split.test), &inputs, &outputs),
+    )
+}
+
+/// One seed's row of Table 1.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    pub seed: u64,
+    /// Per-expression networks, `ORDER`.
+    pub per_expression: [f64; 6],
+    /// MSE_All of the unified network.
+    pub all: f64,
+    /// The unified network on each expression's test pairs and that expression's outputs.
+    pub unified_restricted: [f64; 6],
+}
+
+/// Evaluates trained networks (`nets` in `Network::all()` order) on the test split.
+pub fn evaluate(
+    seed: u64,
+    nets: &[&Mlp],
+    samples: &[Sample],
+    split: &Split,
+    facs: &FacsMaps,
+) -> Result<Row, crate::learn::LearnError> {
+    let networks = Network::all();
+    let mut per_expression = [0.0; 6];
+    let mut unified_restricted = [0.0; 6];
+    let unified = &nets[0];
+    let (_, all_test) = network_pairs(Network::Unified, samples, split, facs);
+    let all = unified.mse(&all_test)?;
+    for (k, &e) in ORDER.iter().enumerate() {
+        let n = networks
+            .iter()
+            .position(|&x| x == Network::Expression(e))
+            .expect("every expression has a network");
+        let (_, test) = network_pairs(networks[n], samples, split, facs);
+        per_expression[k] = nets[n].mse(&test)?;
+        // Unified predictions on e's test pairs, scored on e's outputs only.
+        let (_, outputs) = networks[n].io(facs);
+        let full = pairs(
+            samples,
+            &split.test[e as usize],
+            &(0..AU_COUNT).collect::<Vec<_>>(),
+            &(0..CONTROL_COUNT).collect::<Vec<_>>(),
+        );
+        let predicted = unified.predict(&full.x)?;
+        let m = full.len();
+        let mut sum = 0.0;
+        for i in 0..m {
+            for &o in &outputs {
+                let d = predicted[i * CONTROL_COUNT + o] - full.y[i * CONTROL_COUNT + o];
+                sum += (d as f64).powi(2);
+            }
+        }
+        unified_restricted[k] = sum / (m * outputs.len()) as f64;
+    }
+    Ok(Row {
+        seed,
+        per_expression,
+        all,
+        unified_restricted,
     })
 }

@@ -25,9 +25,8 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::cache::{self, Cache, Lookup};
-use crate::experiments::cell::{assets, Assets, CellRun, Experiment, Plan, Sink};
-use crate::experiments::EXPERIMENTS;
 use crate::io::atomic::write_atomic;
+use crate::run::cell::{assets, Assets, CellRun, Experiment, Plan, Registry, Sink};
 use crate::spec::{self, Cell, LauncherParams, Spec};
 
 use super::folders::{finished_path, new_run_dir, OWNER, PARTIAL};
@@ -111,9 +110,10 @@ fn task_spec(spec: &Spec, seed: u64) -> Spec {
 
 /// The experiments a task of `seed` runs: a further seed leaves out those only the first
 /// seed's network feeds (the inversion, the head-neck experiment, the pose transfer).
-fn task_experiments(cell: &Spec, seed: u64) -> Vec<&'static dyn Experiment> {
+fn task_experiments(cell: &Spec, seed: u64, registry: Registry) -> Vec<&'static dyn Experiment> {
     let first = cell.seeds.first() == Some(&seed);
-    EXPERIMENTS
+    registry
+        .0
         .iter()
         .copied()
         .filter(|e| first || !e.first_seed_only())
@@ -121,9 +121,15 @@ fn task_experiments(cell: &Spec, seed: u64) -> Vec<&'static dyn Experiment> {
 }
 
 /// A task's units (ids) and whether the cache holds each.
-fn task_units(cell: &Cell, seed: u64, a: &Assets, cache: &Cache) -> Result<Vec<(String, bool)>> {
+fn task_units(
+    cell: &Cell,
+    seed: u64,
+    a: &Assets,
+    cache: &Cache,
+    registry: Registry,
+) -> Result<Vec<(String, bool)>> {
     let spec = task_spec(&cell.spec, seed);
-    let experiments = task_experiments(&cell.spec, seed);
+    let experiments = task_experiments(&cell.spec, seed, registry);
     let plan = Plan::of(&spec, &cell.name, a, cache, &experiments, false)?;
     Ok(plan
         .into_iter()
@@ -232,7 +238,7 @@ pub fn launch(spec_path: &Path, opts: &RunOptions) -> Result<Launched> {
     let mut skipped = 0;
     for (i, c) in cells.iter().enumerate() {
         for (s, &seed) in c.spec.seeds.iter().enumerate() {
-            let units = task_units(c, seed, &a, &cache)?;
+            let units = task_units(c, seed, &a, &cache, opts.registry)?;
             if units.iter().all(|(_, cached)| *cached) {
                 skipped += 1;
                 continue;
@@ -400,7 +406,7 @@ pub fn wait(launched: &Launched) -> Result<()> {
     {
         eprintln!(
             "Slurm jobs finished in {}",
-            crate::experiments::stage::duration(started.elapsed().as_secs_f64())
+            crate::run::stage::duration(started.elapsed().as_secs_f64())
         );
         return Ok(());
     }
@@ -426,7 +432,12 @@ pub fn wait(launched: &Launched) -> Result<()> {
 }
 
 /// A task, as Slurm runs it: the cell's units for one seed into the cache, nothing else.
-pub fn task(launch_file: &Path, array: &str, index: Option<usize>) -> Result<()> {
+pub fn task(
+    launch_file: &Path,
+    array: &str,
+    index: Option<usize>,
+    registry: Registry,
+) -> Result<()> {
     let started = Instant::now();
     let launch = read_launch(launch_file)?;
     let index = match index {
@@ -446,7 +457,7 @@ pub fn task(launch_file: &Path, array: &str, index: Option<usize>) -> Result<()>
         .get(t.cell)
         .with_context(|| format!("{}: no cell {}", launch.spec.display(), t.cell))?;
     let spec = task_spec(&c.spec, t.seed);
-    let experiments = task_experiments(&c.spec, t.seed);
+    let experiments = task_experiments(&c.spec, t.seed, registry);
     let a = assets()?;
     let cache = Cache::new(&launch.results.join(".cache"));
     let mut records = Vec::new();
@@ -489,7 +500,7 @@ pub fn task(launch_file: &Path, array: &str, index: Option<usize>) -> Result<()>
         "{}: {} units, {computed} computed, in {}",
         t.describe(),
         records.len(),
-        crate::experiments::stage::duration(done.seconds)
+        crate::run::stage::duration(done.seconds)
     );
     Ok(())
 }
@@ -519,6 +530,7 @@ pub(super) fn check_assembled(
     cells: &[Cell],
     a: &Assets,
     cache: &Cache,
+    registry: Registry,
 ) -> Result<()> {
     let launch = read_launch(&logs(run_dir).join("launch.json"))?;
     let mut missing = Vec::new();
@@ -527,7 +539,7 @@ pub(super) fn check_assembled(
         for &seed in &c.spec.seeds {
             // A unit several of a cell's tasks plan (its dataset) is named once, with the
             // first task that plans it.
-            for (id, cached) in task_units(c, seed, a, cache)? {
+            for (id, cached) in task_units(c, seed, a, cache, registry)? {
                 if cached || !named.insert((c.name.clone(), id.clone())) {
                     continue;
                 }

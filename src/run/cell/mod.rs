@@ -1,10 +1,11 @@
-//! The experiment registry and the context a sweep cell runs in.
+//! What an experiment is to the run machinery, and the context a sweep cell runs in.
 //!
 //! Every table of a run is an [`Experiment`]: its name in a spec's `tables`, the units of work
 //! it adds to a cell's plan (what `facelab status` lists and a cluster launcher submits), how
-//! it computes on a cell through the cache and writes its outputs, and its part of a sweep's
-//! summary. [`EXPERIMENTS`](crate::experiments::EXPERIMENTS) lists them; a new experiment is a
-//! new file and one line there. Experiments meet in a cell's [`CellRun`]: the spec, the cache,
+//! it computes on a cell through the cache and writes its outputs, what it writes when the
+//! cell is done, and its part of a sweep's summary. A [`Registry`] lists them
+//! (`experiments::REGISTRY`, handed to the run); a new experiment is a new folder under
+//! `experiments` and one line in that list. Experiments meet in a cell's [`CellRun`]: the spec, the cache,
 //! the networks every table but the head-neck experiment reads (computed once, on first use),
 //! and [`Products`], where an experiment leaves what a later one reads (Table 2's cohorts for
 //! the inversion and the pose transfer, the voluntary neck network for the pose transfer).
@@ -17,8 +18,7 @@ use std::rc::Rc;
 use anyhow::Result;
 
 use crate::cache::Cache;
-use crate::experiments::face::FaceSource;
-use crate::experiments::stage::{StageRecord, Stages, Unit};
+use crate::run::stage::{StageRecord, Stages, Unit};
 use crate::sim::basis::LinearBasis;
 use crate::sim::FaceModel;
 use crate::spec::Spec;
@@ -38,6 +38,19 @@ pub(crate) use networks::{curves_csv, Networks, Trained};
 pub(crate) const BASIS_VERSION: u32 = 2;
 pub(crate) const DATASET_VERSION: u32 = 3;
 pub(crate) const TRAIN_VERSION: u32 = 1;
+
+/// The experiments a run may hold, in the order a cell runs them
+/// (`facelab::experiments::REGISTRY`). The run machinery is handed them and names none.
+#[derive(Clone, Copy)]
+pub struct Registry(pub(crate) &'static [&'static dyn Experiment]);
+
+impl std::fmt::Debug for Registry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list()
+            .entries(self.0.iter().map(|e| e.name()))
+            .finish()
+    }
+}
 
 /// One table of a run.
 pub(crate) trait Experiment: Sync {
@@ -68,7 +81,14 @@ pub(crate) trait Experiment: Sync {
     /// folder, and, for a single-cell spec, its tables and figures.
     fn run(&self, cx: &mut CellRun) -> Result<()>;
 
-    /// Its part of a sweep's summary, from every cell's products (after all cells ran).
+    /// What it writes after every wanted experiment of a cell ran, whether the cell's spec
+    /// lists it or not (Table 1 records the networks of every cell that trained).
+    fn finish_cell(&self, _cx: &mut CellRun) -> Result<()> {
+        Ok(())
+    }
+
+    /// Its part of a sweep's summary, from every cell's products (after all cells ran; every
+    /// registered experiment, in registry order, whether the spec lists it or not).
     fn sweep(&self, _sweep: &mut Sweep) -> Result<()> {
         Ok(())
     }
@@ -106,9 +126,6 @@ impl Products {
         )
     }
 }
-
-/// A cell's Table 1 rows, kept for the sweep's summary.
-pub(crate) struct Table1Rows(pub(crate) Vec<crate::experiments::table1::Row>);
 
 /// One sweep cell of a run, as its experiments see it.
 pub(crate) struct CellRun<'a> {
@@ -186,7 +203,7 @@ impl<'a> CellRun<'a> {
     /// The cell's face model.
     pub(crate) fn model(&mut self) -> Result<Rc<FaceModel>> {
         let spec = self.spec;
-        once(&mut self.model, || FaceSource::of_spec(spec).model())
+        once(&mut self.model, || spec.face_source().model())
     }
 
     /// The linear basis of the cell's face (cached), when the spec solves from predictions

@@ -1,11 +1,10 @@
 //! The inputs a run's stages share (asset and data files by content) and the cache keys of
 //! a cell's basis, dataset and training stages.
 
+use super::networks::Network;
 use crate::cache;
 use crate::dataset::reader::Source;
 use crate::dataset::{DatasetParams, Family, SolveStart};
-use crate::experiments::stage::Unit;
-use crate::experiments::table1::Network;
 use crate::io::expressions::default_expressions_path;
 use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
 use crate::io::mesh::default_mesh_path;
@@ -13,6 +12,7 @@ use crate::io::observer_fit::read_any_calibration;
 use crate::learn::params::{ModelParams, TrainParams};
 use crate::observe::Calibration;
 use crate::observe::ObserverNoise;
+use crate::run::stage::Unit;
 use crate::spec::Spec;
 use anyhow::{Context, Result};
 use serde::Serialize;

@@ -1,10 +1,13 @@
-//! `facelab run | status | verify`: a spec's stages, cached by content (DESIGN 2.5).
+//! The run machinery: `facelab run | status | verify | task`, a spec's stages cached by
+//! content (DESIGN 2.5), locally or as Slurm job arrays.
 //!
-//! A run resolves the spec into cells and runs, in each cell, every registered experiment
-//! (`experiments::EXPERIMENTS`) the cell's spec asks for, through the cell's context
-//! (`experiments::cell`); then a sweep's summary. The networks' stages and what their keys
-//! hash are in `cell::keys`; each experiment's in its own file. Evaluation and reports are
-//! cheap and always run.
+//! A run resolves the spec into cells and runs, in each cell, every experiment of the registry
+//! it is handed (`RunOptions::registry`, `experiments::REGISTRY`) that the cell's spec asks
+//! for, through the cell's context (`cell`); then a sweep's summary. It names no experiment.
+//! The stage framework is `stage`; the networks' stages (the basis, the dataset, the training
+//! and each network's test) and what their keys hash are in `cell::networks` and
+//! `cell::keys`; each experiment's stages are in its own folder under `experiments`.
+//! Evaluation and reports are cheap and always run.
 //!
 //! Each run writes `results/<experiment>/run-NNNN/` (one subfolder per sweep cell) with the
 //! resolved `spec.toml`, `manifest.json` and CSVs; `results/<experiment>/latest` points at it.
@@ -16,14 +19,15 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use crate::cache::{self, Cache};
-use crate::experiments::cell::{assets, CellRun, Plan, Products, Sink, Sweep};
-use crate::experiments::stage::Unit;
-use crate::experiments::{table1, EXPERIMENTS};
 use crate::io::atomic::write_atomic;
+use crate::run::cell::{assets, CellRun, Plan, Products, Registry, Sink, Sweep};
+use crate::run::stage::Unit;
 use crate::spec;
 
+pub mod cell;
 mod folders;
 mod slurm;
+pub mod stage;
 
 use folders::*;
 pub use slurm::{launch, task, wait, Launched};
@@ -41,6 +45,8 @@ pub struct RunOptions {
     /// The final job of a Slurm run: finish this (`.partial`) run folder, which the launcher
     /// made, once every task's units are in the cache (else name the missing ones).
     pub assemble: Option<PathBuf>,
+    /// The experiments a cell may run (`facelab::experiments::REGISTRY`).
+    pub registry: Registry,
 }
 
 /// Where a spec's run runs: `--launcher` if given, else the spec's `[launcher] kind`.
@@ -55,7 +61,7 @@ pub fn launcher_of(
     }
 }
 
-pub use super::stage::StageRecord;
+pub use stage::StageRecord;
 
 #[derive(Clone, Debug)]
 pub struct RunSummary {
@@ -122,7 +128,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     let latest_at_start = std::fs::read_link(experiment_dir.join("latest")).ok();
     let run_dir = match &opts.assemble {
         Some(dir) => {
-            slurm::check_assembled(dir, &cells, &a, &cache)?;
+            slurm::check_assembled(dir, &cells, &a, &cache, opts.registry)?;
             dir.clone()
         }
         None => new_run_dir(&experiment_dir)?,
@@ -177,19 +183,19 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             &mut records,
             &mut sink,
         );
-        for e in EXPERIMENTS.iter().filter(|e| e.wanted(&c.spec)) {
+        for e in opts.registry.0.iter().filter(|e| e.wanted(&c.spec)) {
             e.run(&mut cx)?;
         }
-        // Every cell that trained records its networks, whatever its tables.
-        if let Some(n) = cx.trained() {
-            table1::record(&mut cx, &n)?;
+        // Every experiment then finishes the cell, whether its spec lists it or not (Table 1
+        // records the networks of every cell that trained).
+        for e in opts.registry.0 {
+            e.finish_cell(&mut cx)?;
         }
         products.push((c.name.clone(), cx.products));
     }
     if !single {
         let mut sweep = Sweep::new(&experiment, &products, &mut sink);
-        table1::sweep_record(&mut sweep)?;
-        for e in EXPERIMENTS {
+        for e in opts.registry.0 {
             e.sweep(&mut sweep)?;
         }
         sweep.finish()?;
@@ -275,7 +281,12 @@ pub struct StatusLine {
 
 /// `facelab status`: every unit of work of every cell and whether the cache holds it. Reads
 /// only: nothing is computed, removed or written.
-pub fn status(spec_path: &Path, sets: &[String], results: &Path) -> Result<Vec<StatusLine>> {
+pub fn status(
+    spec_path: &Path,
+    sets: &[String],
+    results: &Path,
+    registry: Registry,
+) -> Result<Vec<StatusLine>> {
     let cells = spec::load(spec_path, sets)?;
     let a = assets()?;
     let cache = Cache::new(&results.join(".cache"));
@@ -287,7 +298,7 @@ pub fn status(spec_path: &Path, sets: &[String], results: &Path) -> Result<Vec<S
             &cell.name,
             &a,
             &cache,
-            EXPERIMENTS,
+            registry.0,
             cells.len() == 1,
         )?;
         for p in plan {
@@ -316,7 +327,7 @@ pub fn status(spec_path: &Path, sets: &[String], results: &Path) -> Result<Vec<S
     Ok(out)
 }
 
-pub fn verify(run_dir: &Path, threads: usize) -> Result<Vec<String>> {
+pub fn verify(run_dir: &Path, threads: usize, registry: Registry) -> Result<Vec<String>> {
     let manifest_path = run_dir.join("manifest.json");
     let manifest: serde_json::Value = serde_json::from_slice(
         &std::fs::read(&manifest_path)
@@ -350,6 +361,7 @@ pub fn verify(run_dir: &Path, threads: usize) -> Result<Vec<String>> {
                 threads,
                 publish: false,
                 assemble: None,
+                registry,
             },
         );
         let summary = match summary {
