@@ -25,10 +25,12 @@ use crate::run::stage::Unit;
 use crate::spec;
 
 pub mod cell;
+mod committed;
 mod folders;
 mod slurm;
 pub mod stage;
 
+pub use committed::{committed, Committed};
 use folders::*;
 pub use slurm::{launch, task, wait, Launched};
 
