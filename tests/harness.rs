@@ -693,7 +693,6 @@ const NOT_YET_RERUN: &[&str] = &[
     "ablation_family",
     "ablation_observer_source",
     "ablation_samples",
-    "inversion",
 ];
 
 #[test]
