@@ -456,8 +456,14 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         out.push(ear.moved(head, &r));
     }
 
-    // Neck: rings from inside the head down, the top ring with the head, the bottom fixed. Its
-    // front (the throat) lies 5.5 cm behind the chin, as in an adult's profile, so the chin of
+    out.push(neck(&outline, eyes_y, head));
+    out
+}
+
+/// The neck and shoulders: rings from inside the head down, the top ring moved with the head
+/// (`head`), the shoulders fixed.
+fn neck(outline: &[V3], eyes_y: f64, head: impl Fn(V3) -> V3) -> Part {
+    // Its front (the throat) lies 5.5 cm behind the chin, as in an adult's profile, so the chin of
     // an opened jaw, which swings down and back, stays in front of it (with its front 1.6 cm
     // behind the chin, the neck hid the lower face of a wide-open mouth).
     let chin = outline
@@ -507,6 +513,5 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         ..neck
     };
     let normals = vertex_normals(&neck.positions, &neck.triangles);
-    out.push(Part { normals, ..neck });
-    out
+    Part { normals, ..neck }
 }

@@ -135,31 +135,8 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         }
         None => new_run_dir(&experiment_dir)?,
     };
-    // An overridden run is not the committed record: its tables and figures stay in its run
-    // folder (and say what was overridden) unless `--publish` asks otherwise.
-    // A published run's tables and figures are staged in its folder and copied out at the end,
-    // under the results folder's publish lock, together with `latest`.
     let publishes = opts.sets.is_empty() || opts.publish;
-    let publish = if publishes {
-        let staging = run_dir.join(STAGING);
-        Publish {
-            tables: staging.join("paper-tables"),
-            figures: staging.join("figures"),
-            overrides: opts.sets.clone(),
-            staged: Some(Staged {
-                staging,
-                tables: out_root.join("paper-tables"),
-                figures: out_root.join("figures"),
-            }),
-        }
-    } else {
-        Publish {
-            tables: run_dir.join("paper-tables"),
-            figures: run_dir.join("figures"),
-            overrides: opts.sets.clone(),
-            staged: None,
-        }
-    };
+    let publish = publish_plan(&run_dir, &out_root, publishes, &opts.sets);
     let mut records = Vec::new();
     let mut sink = RunSink {
         dir: &run_dir,
@@ -255,6 +232,33 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         stages: records,
         outputs,
     })
+}
+
+/// Where a run's tables and figures go. An overridden run is not the committed record: its
+/// tables and figures stay in its run folder (and say what was overridden) unless `--publish`
+/// asks otherwise. A published run's are staged in its folder and copied out at the end,
+/// under the results folder's publish lock, together with `latest`.
+fn publish_plan(run_dir: &Path, out_root: &Path, publishes: bool, sets: &[String]) -> Publish {
+    if publishes {
+        let staging = run_dir.join(STAGING);
+        Publish {
+            tables: staging.join("paper-tables"),
+            figures: staging.join("figures"),
+            overrides: sets.to_vec(),
+            staged: Some(Staged {
+                staging,
+                tables: out_root.join("paper-tables"),
+                figures: out_root.join("figures"),
+            }),
+        }
+    } else {
+        Publish {
+            tables: run_dir.join("paper-tables"),
+            figures: run_dir.join("figures"),
+            overrides: sets.to_vec(),
+            staged: None,
+        }
+    }
 }
 
 /// A unit's state in the cache, as `facelab status` reports it.
