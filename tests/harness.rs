@@ -690,7 +690,6 @@ const NOT_YET_RERUN: &[&str] = &[
     "ablation_cohort_strength",
     "ablation_dataset_seed",
     "ablation_depth",
-    "ablation_observer_source",
     "ablation_samples",
 ];
 
