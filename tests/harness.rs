@@ -689,7 +689,6 @@ fn manifest_names_the_commit_and_a_clean_checkout_whatever_the_run_writes_into_i
 const NOT_YET_RERUN: &[&str] = &[
     "ablation_dataset_seed",
     "ablation_depth",
-    "ablation_samples",
 ];
 
 #[test]
