@@ -7,7 +7,7 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 
 use crate::cache::Cache;
 use crate::run::cell::{assets, Plan, Registry};
@@ -59,29 +59,13 @@ fn against_today(
     cache: &Cache,
     registry: Registry,
 ) -> Result<Committed> {
-    let path = run.join("manifest.json");
-    let manifest: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(&path).with_context(|| format!("{}: cannot read", path.display()))?,
-    )
-    .with_context(|| format!("{}: not a run manifest", path.display()))?;
+    let (manifest, prefixes) = super::recorded(run)?;
     let recorded: BTreeSet<(String, String)> = manifest["stages"]
         .as_array()
-        .with_context(|| format!("{}: no stages", path.display()))?
+        .with_context(|| format!("{}: no stages", run.join("manifest.json").display()))?
         .iter()
         .filter_map(|s| Some((s["stage"].as_str()?.into(), s["key"].as_str()?.into())))
         .collect();
-    // The recorded, resolved spec of each cell: the run's own, or one per sweep cell folder.
-    let mut prefixes: Vec<String> = manifest["outputs"]
-        .as_object()
-        .with_context(|| format!("{}: no outputs", path.display()))?
-        .keys()
-        .filter_map(|name| name.strip_suffix("spec.toml"))
-        .map(str::to_string)
-        .collect();
-    prefixes.sort();
-    if prefixes.is_empty() {
-        bail!("{}: the run recorded no spec.toml", run.display());
-    }
     // Today's plan of every cell; a unit whose key cannot be known without running (it
     // hashes a cached result not in the cache) is left out.
     let mut today: BTreeSet<(String, String)> = BTreeSet::new();

@@ -333,20 +333,17 @@ pub fn status(
     Ok(out)
 }
 
-pub fn verify(run_dir: &Path, threads: usize, registry: Registry) -> Result<Vec<String>> {
-    let manifest_path = run_dir.join("manifest.json");
+/// A finished run as its folder records it: its manifest, and the folder prefix of each cell's
+/// recorded, resolved `spec.toml` (empty for the run's own, `name/` per sweep cell), sorted.
+pub(super) fn recorded(run_dir: &Path) -> Result<(serde_json::Value, Vec<String>)> {
+    let path = run_dir.join("manifest.json");
     let manifest: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(&manifest_path)
-            .with_context(|| format!("{}: cannot read", manifest_path.display()))?,
+        &std::fs::read(&path).with_context(|| format!("{}: cannot read", path.display()))?,
     )
-    .with_context(|| format!("{}: not a run manifest", manifest_path.display()))?;
-    let outputs = manifest["outputs"]
+    .with_context(|| format!("{}: not a run manifest", path.display()))?;
+    let mut cells: Vec<String> = manifest["outputs"]
         .as_object()
-        .with_context(|| format!("{}: no outputs", manifest_path.display()))?;
-    // The recorded, resolved spec of each cell: the run's own `spec.toml`, or one per sweep
-    // cell folder. Rerunning what was recorded (not the spec path as typed then, which may
-    // have changed since) is what makes this a check of the run.
-    let mut cells: Vec<String> = outputs
+        .with_context(|| format!("{}: no outputs", path.display()))?
         .keys()
         .filter_map(|name| name.strip_suffix("spec.toml"))
         .map(str::to_string)
@@ -355,6 +352,16 @@ pub fn verify(run_dir: &Path, threads: usize, registry: Registry) -> Result<Vec<
     if cells.is_empty() {
         bail!("{}: the run recorded no spec.toml", run_dir.display());
     }
+    Ok((manifest, cells))
+}
+
+pub fn verify(run_dir: &Path, threads: usize, registry: Registry) -> Result<Vec<String>> {
+    // Rerunning each cell's recorded spec (not the spec path as typed then, which may have
+    // changed since) is what makes this a check of the run.
+    let (manifest, cells) = recorded(run_dir)?;
+    let outputs = manifest["outputs"]
+        .as_object()
+        .expect("recorded() checked the outputs");
     let tmp = std::env::temp_dir().join(format!("facelab-verify-{}", std::process::id()));
     let mut differ = Vec::new();
     for prefix in &cells {
