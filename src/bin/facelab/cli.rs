@@ -328,8 +328,9 @@ pub struct TransferArgs {
     /// How the expression becomes activations: `landmarks`, the landmark-space fit to the
     /// person's landmark motion from their neutral face (the default for pictures; an
     /// OpenFace file needs its 3D landmarks), or `network`, the run's unified network on
-    /// the AUs (the default for OpenFace files)
-    #[arg(long, value_parser = ["landmarks", "network"])]
+    /// the AUs (the default for OpenFace files), or `aus`, the AU-space fit: the
+    /// activations whose face reads as the input's AUs, through the face itself
+    #[arg(long, value_parser = ["landmarks", "network", "aus"])]
     pub method: Option<String>,
     /// Output file or folder
     #[arg(long)]

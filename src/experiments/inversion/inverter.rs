@@ -6,7 +6,7 @@
 use anyhow::Result;
 
 use crate::experiments::observe::model_observer;
-use crate::invert::{accelerated, projected_newton, Bound, BoxQp, Solution};
+use crate::invert::{accelerated, au_fit, projected_newton, Bound, BoxQp, Solution};
 use crate::observe::{landmarks, Calibration, Observer, AU_COUNT, LANDMARK_COUNT};
 use crate::sim::basis::LinearBasis;
 use crate::sim::controls::{CONTROL_COUNT, JAW_ROTATION, JAW_SLIDE, JAW_TWIST, MUSCLE_COUNT};
@@ -199,6 +199,98 @@ impl<'a> Inverter<'a> {
         })
     }
 
+    /// AU-space fit of readings `r` through the basis: projected Gauss-Newton
+    /// ([`au_fit`], forward-difference Jacobian, step test 1e-4, at most 30 iterations) from
+    /// `start`, minimizing `|AU(x) - r|^2 + prior |x|^2`. The prior picks, among activations
+    /// whose faces read alike, the smallest, and keeps muscles the reading does not ask for
+    /// at rest; `prior = 0` is the plain least squares of the inversion table.
+    pub fn aus_basis(&self, r: &[f64], start: &[f64], prior: f64) -> Solution {
+        let mut surface = Vec::new();
+        let w = prior.sqrt();
+        let mut f = |x: &[f64]| {
+            let mut v = self.basis_aus(x, &mut surface);
+            if prior > 0.0 {
+                v.extend(x.iter().map(|a| w * a));
+            }
+            v
+        };
+        let mut target = r.to_vec();
+        if prior > 0.0 {
+            target.resize(r.len() + start.len(), 0.0);
+        }
+        au_fit(&mut f, &target, start, 1e-4, 1e-4, 30)
+    }
+
+    /// AU-space fit of readings `r` corrected through the nonlinear face, as
+    /// [`Inverter::landmarks_refined`] corrects the landmark fit: the basis fit
+    /// ([`Inverter::aus_basis`] from rest), then `refinements` times the nonlinear face is
+    /// solved at the fit, its AUs' departure from the basis' reading is subtracted from the
+    /// target and the basis fit repeated from `x`. Keeps the iterate whose face's misfit
+    /// (`|AU - r|^2 + prior |x|^2`) is least; `rms` is that face's RMS AU error. The faces
+    /// are solved at a loosened tolerance, each from the one before it (from the basis
+    /// prediction where that fails), so the answer is a function of `r` alone.
+    pub fn aus_refined(
+        &self,
+        r: &[f64],
+        prior: f64,
+        refinements: usize,
+        ws: &mut Workspace,
+        params: &SolveParams,
+    ) -> Result<Refined> {
+        let mut surface = Vec::new();
+        let mut x = self.aus_basis(r, &vec![0.0; self.columns.len()], prior).a;
+        let params = &SolveParams {
+            tolerance: params.tolerance * CORRECTION_LOOSENING,
+            ..*params
+        };
+        let misfit = |aus: &[f64], x: &[f64]| -> f64 {
+            aus.iter().zip(r).map(|(a, b)| (a - b).powi(2)).sum::<f64>()
+                + prior * x.iter().map(|v| v * v).sum::<f64>()
+        };
+        let mut best: Option<(f64, f64, Vec<f64>, crate::sim::State)> = None;
+        let mut first_rms = None;
+        let mut last: Option<crate::sim::State> = None;
+        for step in 0..=refinements {
+            let a = activations(&x);
+            let warm = last.take().and_then(|mut state| {
+                crate::sim::solve(self.model, &a, &mut state, ws, params)
+                    .ok()
+                    .map(|_| state)
+            });
+            let solved = match warm {
+                Some(state) => Ok(state),
+                None => solve_predicted(self.model, self.basis, &a, ws, params).map(|r| r.0),
+            };
+            let state = match solved {
+                Ok(state) => state,
+                Err(e) if step == 0 => return Err(e.into()),
+                Err(_) => break,
+            };
+            let (nl, _) = self.read(&state)?;
+            let e = (nl.iter().zip(r).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / AU_COUNT as f64)
+                .sqrt();
+            first_rms.get_or_insert(e);
+            let cost = misfit(&nl, &x);
+            if best.as_ref().is_none_or(|b| cost < b.0) {
+                best = Some((cost, e, x.clone(), state.clone()));
+            }
+            last = Some(state);
+            if step == refinements {
+                break;
+            }
+            let bl = self.basis_aus(&x, &mut surface);
+            let target: Vec<f64> = (0..AU_COUNT).map(|k| r[k] - (nl[k] - bl[k])).collect();
+            x = self.aus_basis(&target, &x, prior).a;
+        }
+        let (_, e, x, state) = best.expect("the first step either solved or returned");
+        Ok(Refined {
+            activations: activations(&x),
+            rms: Some(e),
+            first_rms,
+            state: Some(state),
+        })
+    }
+
     /// Landmark-space fit of displacements `d` under `bound`, from rest, to a proximal
     /// gradient of 1e-6 relative (at most 20,000 iterations). Also returns the final
     /// proximal gradient's norm relative to `|M^T d|`, the unit of that test.
@@ -210,13 +302,20 @@ impl<'a> Inverter<'a> {
     }
 }
 
+/// Weight of the squared activations in a transfer's AU-space fit ([`Inverter::aus_refined`]),
+/// in squared AU per squared activation: a muscle at full activation costs what a 0.1 AU
+/// misfit does, so among activations whose faces read alike the fit takes the smallest and
+/// leaves at rest what the reading does not ask for.
+pub const AU_PRIOR: f64 = 0.01;
+
 /// How much looser than the caller's the tolerance of [`Inverter::landmarks_refined`]'s
 /// solves is: their faces only estimate the basis' defect and rank the iterates, and the
 /// kept activations are solved again at the caller's tolerance by whoever takes them.
 const CORRECTION_LOOSENING: f64 = 10.0;
 
-/// What [`Inverter::landmarks_refined`] found: the kept activations and the landmark RMS
-/// (IOD units) of their nonlinear face and of the uncorrected fit's.
+/// What [`Inverter::landmarks_refined`] or [`Inverter::aus_refined`] found: the kept
+/// activations and the misfit of their nonlinear face and of the uncorrected fit's (RMS over
+/// the landmarks in IOD units, or over the AUs).
 #[derive(Clone, Debug)]
 pub struct Refined {
     pub activations: Activations,

@@ -48,7 +48,7 @@ mod report;
 
 pub(crate) use inverter::flat;
 use inverter::{activations, rms};
-pub use inverter::{Inverter, Refined};
+pub use inverter::{Inverter, Refined, AU_PRIOR};
 
 pub use report::{csv, markdown, timing_csv, timing_markdown};
 

@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use super::run_spec;
-use crate::experiments::inversion::Inverter;
+use crate::experiments::inversion::{Inverter, Refined, AU_PRIOR};
 use crate::sim::basis::LinearBasis;
 use crate::sim::solver::solve_predicted;
 use crate::sim::{solve, Activations, SolveParams, Workspace};
@@ -49,6 +49,19 @@ pub(super) fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Fitted
     landmark_fit(&spec, &model, &calibration, &displacements)
 }
 
+/// Each used row's AUs, indexed by `frame - 1` (`None`: no used row), what
+/// [`au_space_fit`] matches.
+pub(super) fn aus_by_frame(
+    file: &crate::io::openface::OpenFaceFile,
+) -> Vec<Option<[f64; crate::observe::AU_COUNT]>> {
+    let frames = file.rows.iter().map(|r| r.frame).max().unwrap_or(0).max(0) as usize;
+    let mut aus = vec![None; frames];
+    for r in file.rows.iter().filter(|r| r.frame >= 1) {
+        aus[r.frame as usize - 1] = Some(r.aus);
+    }
+    aus
+}
+
 /// The landmark-space fit of each frame's landmark displacements (`None`: no face): the
 /// inversion table's `Inverter` on the linear basis of `model`, built at the spec's solver
 /// tolerance, corrected `inversion.refinements` times through the nonlinear face
@@ -60,25 +73,68 @@ pub(super) fn landmark_fit(
     calibration: &crate::observe::Calibration,
     displacements: &[Option<Vec<f64>>],
 ) -> Result<Vec<Option<Fitted>>> {
+    let refinements = spec.inversion.refinements;
+    fit_frames(
+        spec,
+        model,
+        calibration,
+        displacements,
+        |inverter, d, ws, params| {
+            inverter
+                .landmarks_refined(d, refinements, ws, params)
+                .context("the landmark fit's face")
+        },
+    )
+}
+
+/// The AU-space fit of each frame's AUs (`None`: no face): the activations whose face the
+/// spec's observer reads as those AUs, least squares through the linear basis over the box
+/// with `AU_PRIOR` times the squared activations added, corrected `inversion.refinements`
+/// times through the nonlinear face ([`Inverter::aus_refined`]); frames in parallel.
+/// Where an AU asks for more than the face can make, its muscles go to their bound and the
+/// rest of the reading is still matched, instead of the network's extrapolation.
+pub(super) fn au_space_fit(
+    spec: &crate::spec::Spec,
+    model: &crate::sim::FaceModel,
+    calibration: &crate::observe::Calibration,
+    aus: &[Option<[f64; crate::observe::AU_COUNT]>],
+) -> Result<Vec<Option<Fitted>>> {
+    let refinements = spec.inversion.refinements;
+    fit_frames(spec, model, calibration, aus, |inverter, r, ws, params| {
+        inverter
+            .aus_refined(r, AU_PRIOR, refinements, ws, params)
+            .context("the AU fit's face")
+    })
+}
+
+/// Each frame's input fitted by `fit` with the inversion table's `Inverter` on the linear
+/// basis of `model` (built at the spec's solver tolerance), in parallel, and the fitted
+/// activations' face solved at that tolerance from the fit's own face (from the basis
+/// prediction where that fails).
+fn fit_frames<T: Sync>(
+    spec: &crate::spec::Spec,
+    model: &crate::sim::FaceModel,
+    calibration: &crate::observe::Calibration,
+    inputs: &[Option<T>],
+    fit: impl Fn(&Inverter, &T, &mut Workspace, &SolveParams) -> Result<Refined> + Sync,
+) -> Result<Vec<Option<Fitted>>> {
     let params = SolveParams {
         tolerance: spec.dataset.tolerance,
         ..SolveParams::default()
     };
-    let basis = LinearBasis::build(model, &params)
-        .context("the linear basis for the landmark-space fit")?;
+    let basis =
+        LinearBasis::build(model, &params).context("the linear basis for the transfer's fit")?;
     let inverter = Inverter::new(model, &basis, calibration)?;
-    let refinements = spec.inversion.refinements;
-    displacements
+    inputs
         .par_iter()
         .enumerate()
         .map_init(
             || Workspace::new(model),
-            |ws, (i, d)| {
-                let Some(d) = d else { return Ok(None) };
+            |ws, (i, input)| {
+                let Some(input) = input else { return Ok(None) };
                 let ws = ws.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
-                let fit = inverter
-                    .landmarks_refined(d, refinements, ws, &params)
-                    .with_context(|| format!("frame {}: the landmark fit's face", i + 1))?;
+                let fit = fit(&inverter, input, ws, &params)
+                    .with_context(|| format!("frame {}", i + 1))?;
                 // The kept face, solved at the loosened tolerance, is a near start for the
                 // full one; where that fails, the basis prediction.
                 let a = fit.activations;

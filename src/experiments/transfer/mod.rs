@@ -15,7 +15,7 @@ mod fit;
 mod neck;
 
 pub use fit::Fitted;
-use fit::{landmark_fit, openface_fit};
+use fit::{au_space_fit, aus_by_frame, landmark_fit, openface_fit};
 
 pub(crate) use neck::follow;
 use neck::{drive_neck, neck_weights, no_neck_controller};
@@ -79,6 +79,11 @@ pub enum TransferMethod {
     /// rows); there it is not better than the network on the whole, so it is not the default.
     #[default]
     Landmarks,
+    /// The AU-space fit (the inversion table's `aus_refined` with a prior toward rest): the
+    /// activations whose face facelab's observer reads as the input's AUs, through the
+    /// linear basis over the box, corrected through the nonlinear face. An AU beyond the
+    /// face's reach takes its muscles to their bound, where the network extrapolates.
+    Aus,
 }
 
 impl TransferMethod {
@@ -86,6 +91,7 @@ impl TransferMethod {
         match s {
             "network" => Some(TransferMethod::Network),
             "landmarks" => Some(TransferMethod::Landmarks),
+            "aus" => Some(TransferMethod::Aus),
             _ => None,
         }
     }
@@ -174,10 +180,8 @@ fn run_spec(run: &Path) -> Result<crate::spec::Spec> {
         .spec)
 }
 
-/// Runs the transfer and writes `transferred.csv`, `activations.csv`, `mse.csv`, renders of
-/// the chosen frames and, for more than one frame, `transfer.gif`.
-pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
-    let run = &opts.model;
+/// The run's unified network (`unified.safetensors`), checked to be the 17 -> 56 one.
+fn unified_network(run: &Path) -> Result<Mlp> {
     let weights = run.join("unified.safetensors");
     let bytes = std::fs::read(&weights).with_context(|| {
         format!(
@@ -195,6 +199,14 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
             mlp.outputs
         );
     }
+    Ok(mlp)
+}
+
+/// Runs the transfer and writes `transferred.csv`, `activations.csv`, `mse.csv`, renders of
+/// the chosen frames and, for more than one frame, `transfer.gif`. The network is read only
+/// where the activations are not `opts.fitted`.
+pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
+    let run = &opts.model;
     let spec = run_spec(run)?;
 
     let file = match &opts.openface_bytes {
@@ -232,7 +244,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
             rows.into_iter().map(|f| (f.activations, f.state)).unzip()
         }
         None => {
-            let acts = predict_activations(&mlp, map.as_ref(), &reference)?;
+            let acts = predict_activations(&unified_network(run)?, map.as_ref(), &reference)?;
             let none = vec![None; acts.len()];
             (acts, none)
         }
@@ -533,18 +545,40 @@ pub fn transfer_path(
     method: Option<TransferMethod>,
 ) -> Result<(TransferSummary, Option<super::photos::LandmarkOutput>)> {
     use super::photos::{input_kind, landmark_files, write_files, InputKind};
+    let fits = method.is_none_or(|m| m != TransferMethod::Network);
+    if fits && normalize.is_some_and(|n| n != Normalization::None) {
+        bail!(
+            "--normalize maps the AUs onto the network's training range: it needs --method \
+             network (the fits, the default, match the AUs as they are)"
+        );
+    }
     if input_kind(input)? == InputKind::OpenFace {
-        if method == Some(TransferMethod::Landmarks) {
-            let opts = TransferOptions {
-                openface: input.to_path_buf(),
-                fitted: Some(openface_fit(input, &opts.model)?),
-                ..opts.clone()
-            };
-            return Ok((transfer_openface(&opts)?, None));
-        }
+        let fitted = match method.unwrap_or(TransferMethod::Aus) {
+            TransferMethod::Network => None,
+            TransferMethod::Landmarks => Some(openface_fit(input, &opts.model)?),
+            TransferMethod::Aus => {
+                let spec = run_spec(&opts.model)?;
+                let model = spec.face_source().model()?;
+                let calibration = crate::run::cell::spec_calibration(&spec)?;
+                let file = read_openface(input)?;
+                Some(au_space_fit(
+                    &spec,
+                    &model,
+                    &calibration,
+                    &aus_by_frame(&file),
+                )?)
+            }
+        };
+        // The network reads a file's AUs min-max normalized unless told otherwise; the fits
+        // match them as they are.
+        let default = match fitted {
+            None => Normalization::MinMax,
+            Some(_) => Normalization::None,
+        };
         let opts = TransferOptions {
             openface: input.to_path_buf(),
-            normalize: normalize.unwrap_or(Normalization::MinMax),
+            normalize: normalize.unwrap_or(default),
+            fitted,
             ..opts.clone()
         };
         return Ok((transfer_openface(&opts)?, None));
@@ -571,6 +605,15 @@ pub fn transfer_path(
             &calibration,
             &landmarked.displacements,
         )?),
+        TransferMethod::Aus => {
+            let file = parse_openface(landmarked.files[0].1.clone(), &landmarked.openface)?;
+            Some(au_space_fit(
+                &spec,
+                &model,
+                &calibration,
+                &aus_by_frame(&file),
+            )?)
+        }
     };
     let opts = TransferOptions {
         fitted,
