@@ -1,5 +1,6 @@
 //! The real-data table (`tables = ["realfaces"]`, DESIGN 2.4): real OpenFace files transferred
-//! through a run's unified network onto the model, unnormalized and normalized, and scored as
+//! onto the model through a run's unified network, unnormalized and normalized, and by the
+//! AU-space fit (`facelab transfer`'s default for OpenFace files), and scored as
 //! Table 2 scores the cohorts: per-AU MSE on the 0-1 scale between OpenFace's AUs in the file
 //! and the spec's observer's reading of the transferred face. With the readout fitted to
 //! OpenFace (`observer.calibration = "experiments/au_observer_fit.csv"`) both sides are on
@@ -7,15 +8,18 @@
 //!
 //! The files are those of a list (`realfaces.files`, default `experiments/realdata.csv`: file,
 //! person, licence) under a data folder (`realfaces.data`, default `../shared/realdata`),
-//! which the project does not commit. Stage key (`realfaces`, per seed): the content of every
+//! which the project does not commit. Stage keys: `realfaces`, per seed, the content of every
 //! listed file, `realfaces.frame_stride`, `table2.normalization`, and the keys of the seed's
-//! unified network, the dataset (its AU range) and the basis.
+//! unified network, the dataset (its AU range) and the basis; `realfaces_fit`, once, the
+//! content, the stride, `inversion.refinements`, the fit's prior and the dataset's and
+//! basis' keys.
 
 use anyhow::{bail, Context, Result};
 
 use super::table2::{range_map, training_range, transfer, Setting};
 use crate::cache::{self, Entry};
 use crate::dataset::reader::FaceReader;
+use crate::experiments::inversion::AU_PRIOR;
 use crate::io::openface::read_openface;
 use crate::io::realdata::RealInput;
 use crate::io::rows::{self, num, CsvRow};
@@ -30,19 +34,56 @@ use crate::spec::Spec;
 
 // 1: first version.
 const REALFACES_VERSION: u32 = 1;
+// 1: first version.
+const REALFACES_FIT_VERSION: u32 = 1;
+
+/// How a file's AUs became activations: the unified network in one of Table 2's settings,
+/// or the AU-space fit (`facelab transfer`'s default for OpenFace files), which needs no
+/// network. Written as `unnormalized`, `normalized`, `au_fit`.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Route {
+    Unnormalized,
+    Normalized,
+    AuFit,
+}
+
+impl Route {
+    pub const ALL: [Route; 3] = [Route::Unnormalized, Route::Normalized, Route::AuFit];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Route::Unnormalized => "unnormalized",
+            Route::Normalized => "normalized",
+            Route::AuFit => "au_fit",
+        }
+    }
+}
+
+impl From<Setting> for Route {
+    fn from(s: Setting) -> Route {
+        match s {
+            Setting::Unnormalized => Route::Unnormalized,
+            Setting::Normalized => Route::Normalized,
+        }
+    }
+}
 
 /// AU12 at or above this in the file marks a real smile (the issue's smile check).
 pub const SMILE_AU12: f64 = 2.5;
 /// AU01 and AU02 both at or above this mark a real brow raise.
 pub const BROW_RAISE: f64 = 2.0;
 
-/// One file in one setting, for one seed.
+/// One file by one route, for one seed (the AU fit's rows carry the first seed: it has no
+/// network).
 #[derive(Clone, Debug, PartialEq)]
 pub struct FileRow {
     pub seed: u64,
     pub file: String,
     pub person: String,
-    pub setting: Setting,
+    pub route: Route,
     /// Frames transferred.
     pub frames: usize,
     /// Rows with `success = 0`, skipped.
@@ -156,7 +197,13 @@ impl Experiment for Realfaces {
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {
         match crate::io::realdata::inputs(&plan.spec.realfaces) {
-            Ok(files) => plan_files(plan, "realfaces", &files),
+            Ok(files) => {
+                plan_files(plan, "realfaces", &files)?;
+                let k = plan.keys();
+                let u = fit_unit(plan.spec, &content(&files)?, &k.dataset, k.basis.as_deref());
+                plan.add("realfaces au fit", u);
+                Ok(())
+            }
             Err(e) => {
                 plan.waiting("realfaces", e.to_string());
                 Ok(())
@@ -166,7 +213,8 @@ impl Experiment for Realfaces {
 
     fn run(&self, cx: &mut CellRun) -> Result<()> {
         let files = crate::io::realdata::inputs(&cx.spec.realfaces)?;
-        let rows = through_networks(cx, &files)?;
+        let mut rows = through_networks(cx, &files)?;
+        rows.extend(through_fit(cx, &files)?);
         cx.output("realfaces.csv", csv(&rows))?;
         cx.table("realfaces.md", &markdown(&rows, cx.spec))?;
         cx.products.put(RealfacesRows(rows));
@@ -207,6 +255,82 @@ pub(crate) fn through_networks(cx: &mut CellRun, files: &[RealInput]) -> Result<
         observer: &observer,
     };
     run(&inputs, &mut cx.stages())
+}
+
+/// The real files through the AU-space fit: the files' content, `realfaces.frame_stride`,
+/// `inversion.refinements`, the fit's prior, and the keys of the dataset (face, observer and
+/// tolerance) and the basis.
+pub fn fit_unit(spec: &Spec, content: &str, dataset_key: &str, basis_key: Option<&str>) -> Unit {
+    let mut deps = vec![dataset_key];
+    deps.extend(basis_key);
+    Unit::new(
+        "realfaces_fit",
+        REALFACES_FIT_VERSION,
+        &(
+            content,
+            spec.realfaces.frame_stride,
+            spec.inversion.refinements,
+            AU_PRIOR,
+        ),
+        &deps,
+    )
+}
+
+/// Real OpenFace files through the AU-space fit, each frame a function of its own AUs (the
+/// frames of a file are fitted in parallel), each face read as the cell reads its faces.
+/// The rows carry the first seed.
+fn through_fit(cx: &mut CellRun, files: &[RealInput]) -> Result<Vec<FileRow>> {
+    let spec = cx.spec;
+    let (k, model) = (cx.keys()?, cx.model()?);
+    let calibration = spec_calibration(spec)?;
+    let reader = FaceReader::new(spec.observer_source)?;
+    let observer = reader.observer(&model, calibration.clone())?;
+    let content = content(files)?;
+    let unit = fit_unit(spec, &content, &k.dataset, k.basis.as_deref());
+    let params = SolveParams {
+        tolerance: spec.dataset.tolerance,
+        ..SolveParams::default()
+    };
+    let RealRows(text) = cx.stages().get_or_compute(&unit, |stages| {
+        let progress = stages.bar(files.len() as u64, "realfaces au fit");
+        let mut rows = Vec::new();
+        for f in files {
+            let (reference, skipped) = frames_of(f, spec.realfaces.frame_stride)?;
+            let targets: Vec<Option<[f64; AU_COUNT]>> =
+                reference.iter().copied().map(Some).collect();
+            let fits =
+                crate::experiments::transfer::au_space_fit(spec, &model, &calibration, &targets)
+                    .with_context(|| format!("{}: the AU fit", f.file))?;
+            let mut ws = crate::sim::Workspace::new(&model)?;
+            let mut got = Vec::with_capacity(fits.len());
+            for (i, fit) in fits.into_iter().enumerate() {
+                let fit = fit.expect("every frame has AUs");
+                let state = match fit.state {
+                    Some(state) => state,
+                    None => {
+                        crate::sim::solve_from_rest(&model, &fit.activations, &mut ws, &params)
+                            .with_context(|| {
+                                format!("{}: used frame {}: the AU fit's face", f.file, i + 1)
+                            })?
+                            .0
+                    }
+                };
+                got.push(observer.observe(&reader.read(&model, &state, None)?)?.aus);
+            }
+            rows.push(file_row(
+                spec.seeds[0],
+                f,
+                Route::AuFit,
+                &reference,
+                skipped,
+                &got,
+            ));
+            progress.inc(1);
+        }
+        progress.finish_and_clear();
+        Ok(RealRows(csv(&rows)))
+    })?;
+    from_csv(&text, "realfaces.csv")
 }
 
 /// The units of `files` through every seed's unified network, labelled `label seed N`.
@@ -295,38 +419,57 @@ pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Vec<FileRow>> {
                 let i = ci % files.len();
                 let (reference, skipped) = &files[i];
                 let got: Vec<[f64; AU_COUNT]> = frames.iter().map(|f| f.aus).collect();
-                let raised: Vec<_> = reference
-                    .iter()
-                    .zip(&got)
-                    .filter(|(r, _)| r[AU01] >= BROW_RAISE && r[AU02] >= BROW_RAISE)
-                    .collect();
-                rows.push(FileRow {
-                    seed: *seed,
-                    file: inp.files[i].file.clone(),
-                    person: inp.files[i].person.clone(),
-                    setting,
-                    frames: reference.len(),
-                    skipped: *skipped,
-                    mse: super::table2::au_mse(reference, &got),
-                    smile: mean_abs(
-                        reference
-                            .iter()
-                            .zip(&got)
-                            .filter(|(r, _)| r[AU12] >= SMILE_AU12)
-                            .map(|(r, g)| (r[AU12], g[AU12])),
-                    ),
-                    brow: {
-                        let (n, a) = mean_abs(raised.iter().map(|(r, g)| (r[AU01], g[AU01])));
-                        let (_, b) = mean_abs(raised.iter().map(|(r, g)| (r[AU02], g[AU02])));
-                        (n, a, b)
-                    },
-                });
+                rows.push(file_row(
+                    *seed,
+                    &inp.files[i],
+                    setting.into(),
+                    reference,
+                    *skipped,
+                    &got,
+                ));
             }
             Ok(RealRows(csv(&rows)))
         })?;
         out.extend(from_csv(&text, "realfaces.csv")?);
     }
     Ok(out)
+}
+
+/// A file's row: its AUs `reference` against the transferred face's `got`.
+fn file_row(
+    seed: u64,
+    input: &RealInput,
+    route: Route,
+    reference: &[[f64; AU_COUNT]],
+    skipped: usize,
+    got: &[[f64; AU_COUNT]],
+) -> FileRow {
+    let raised: Vec<_> = reference
+        .iter()
+        .zip(got)
+        .filter(|(r, _)| r[AU01] >= BROW_RAISE && r[AU02] >= BROW_RAISE)
+        .collect();
+    FileRow {
+        seed,
+        file: input.file.clone(),
+        person: input.person.clone(),
+        route,
+        frames: reference.len(),
+        skipped,
+        mse: super::table2::au_mse(reference, got),
+        smile: mean_abs(
+            reference
+                .iter()
+                .zip(got)
+                .filter(|(r, _)| r[AU12] >= SMILE_AU12)
+                .map(|(r, g)| (r[AU12], g[AU12])),
+        ),
+        brow: {
+            let (n, a) = mean_abs(raised.iter().map(|(r, g)| (r[AU01], g[AU01])));
+            let (_, b) = mean_abs(raised.iter().map(|(r, g)| (r[AU02], g[AU02])));
+            (n, a, b)
+        },
+    }
 }
 
 const AU01: usize = 0;
@@ -339,7 +482,7 @@ struct FileLine {
     seed: u64,
     file: String,
     person: String,
-    setting: Setting,
+    setting: Route,
     frames: usize,
     skipped: usize,
     #[serde(with = "num::all")]
@@ -383,7 +526,7 @@ pub fn csv(rows: &[FileRow]) -> String {
             seed: r.seed,
             file: r.file.clone(),
             person: r.person.clone(),
-            setting: r.setting,
+            setting: r.route,
             frames: r.frames,
             skipped: r.skipped,
             mse: r.mse,
@@ -405,7 +548,7 @@ pub fn from_csv(text: &str, name: &str) -> Result<Vec<FileRow>> {
             seed: l.seed,
             file: l.file,
             person: l.person,
-            setting: l.setting,
+            route: l.setting,
             frames: l.frames,
             skipped: l.skipped,
             mse: l.mse,
@@ -439,15 +582,19 @@ fn pooled(rows: &[&FileRow]) -> [f64; AU_COUNT] {
     })
 }
 
-/// `paper-tables/realfaces.md`: per file and setting, and per AU pooled over the files.
+/// `paper-tables/realfaces.md`: per file and route, and per AU pooled over the files.
 pub fn markdown(rows: &[FileRow], spec: &Spec) -> String {
     let seeds: Vec<String> = spec.seeds.iter().map(u64::to_string).collect();
     let first = spec.seeds[0];
     let mut md = format!(
         "# Real faces: transfer error on real OpenFace files\n\n\
          Each file of `{}` (under `{}`; not in the repository) is transferred frame by frame \
-         through the unified network (dataset family `{}`, seed{} {}) onto the model, \
-         unnormalized and normalized ({} onto the training data's range, per file). The \
+         onto the model by three routes: through the unified network (dataset family `{}`, \
+         seed{} {}), unnormalized and normalized ({} onto the training data's range, per \
+         file), and by the AU-space fit (`au_fit`, `facelab transfer`'s default for OpenFace \
+         files: the activations whose face the observer reads as the frame's AUs, through the \
+         linear basis with a prior of {AU_PRIOR} per squared activation, corrected {} times \
+         through the nonlinear face; no network, so one row per file). The \
          measure compares **OpenFace's AUs in the file** with **our observer's reading of the \
          transferred face** (`{}`){}: per-AU MSE on the 0-1 scale (AU / 5). The network never \
          saw these people; the observer's readout was fitted on them (its leave-one-person-out \
@@ -461,6 +608,7 @@ pub fn markdown(rows: &[FileRow], spec: &Spec) -> String {
         if seeds.len() > 1 { "s" } else { "" },
         seeds.join(", "),
         spec.table2_normalization.name(),
+        spec.inversion.refinements,
         spec.calibration,
         if spec.reads_on_openface_scale() {
             ", both on OpenFace's scale after the fit"
@@ -499,7 +647,7 @@ pub fn markdown(rows: &[FileRow], spec: &Spec) -> String {
         t.push(TableRow::new(vec![
             r.file.clone(),
             r.person.clone(),
-            r.setting.name().to_string(),
+            r.route.name().to_string(),
             format!("{} ({})", r.frames, r.skipped),
             f4(r.mean()),
             format!("{} ({})", AU_NAMES[worst], f4(r.mse[worst])),
@@ -516,10 +664,13 @@ pub fn markdown(rows: &[FileRow], spec: &Spec) -> String {
     ));
     let header: Vec<&str> = ["setting", "mean"].into_iter().chain(AU_NAMES).collect();
     let mut t = Table::labelled(&header);
-    for setting in Setting::ALL {
-        let of: Vec<&FileRow> = rows.iter().filter(|r| r.setting == setting).collect();
+    for route in Route::ALL {
+        let of: Vec<&FileRow> = rows.iter().filter(|r| r.route == route).collect();
+        if of.is_empty() {
+            continue;
+        }
         let p = pooled(&of);
-        let cells = [setting.name().to_string(), f4(crate::stats::mean(&p))];
+        let cells = [route.name().to_string(), f4(crate::stats::mean(&p))];
         t.push(TableRow::new(cells.into_iter().chain(p.map(f4)).collect()));
     }
     md.push_str(&t.markdown());
@@ -541,20 +692,23 @@ pub fn sweep_markdown(cells: &[(String, Vec<FileRow>)]) -> String {
         let means = cells.iter().map(|(_, rows)| {
             let v = rows
                 .iter()
-                .find(|x| x.seed == seed && x.file == r.file && x.setting == r.setting)
+                .find(|x| x.seed == seed && x.file == r.file && x.route == r.route)
                 .map(FileRow::mean)
                 .unwrap_or(f64::NAN);
             f4(v)
         });
-        let label = [r.file.clone(), r.setting.name().to_string()];
+        let label = [r.file.clone(), r.route.name().to_string()];
         t.push(TableRow::new(label.into_iter().chain(means).collect()));
     }
-    for setting in Setting::ALL {
+    for route in Route::ALL {
+        if !first.iter().any(|r| r.route == route) {
+            continue;
+        }
         let means = cells.iter().map(|(_, rows)| {
-            let of: Vec<&FileRow> = rows.iter().filter(|r| r.setting == setting).collect();
+            let of: Vec<&FileRow> = rows.iter().filter(|r| r.route == route).collect();
             f4(crate::stats::mean(&pooled(&of)))
         });
-        let label = ["pooled".to_string(), setting.name().to_string()];
+        let label = ["pooled".to_string(), route.name().to_string()];
         t.push(TableRow::new(label.into_iter().chain(means).collect()));
     }
     md + &t.markdown()

@@ -77,7 +77,7 @@ pub(super) fn real_summary(real: &[FileRow]) -> Vec<(String, Vec<f64>, Vec<f64>)
     Setting::ALL
         .iter()
         .filter_map(|&s| {
-            let mine: Vec<&FileRow> = real.iter().filter(|r| r.setting == s).collect();
+            let mine: Vec<&FileRow> = real.iter().filter(|r| r.route == s.into()).collect();
             let first = mine.first()?;
             let mses: Vec<&[f64; AU_COUNT]> = mine.iter().map(|r| &r.mse).collect();
             let (mean, ci) = over_seeds(&mses);

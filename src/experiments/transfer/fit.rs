@@ -93,7 +93,7 @@ pub(super) fn landmark_fit(
 /// times through the nonlinear face ([`Inverter::aus_refined`]); frames in parallel.
 /// Where an AU asks for more than the face can make, its muscles go to their bound and the
 /// rest of the reading is still matched, instead of the network's extrapolation.
-pub(super) fn au_space_fit(
+pub(crate) fn au_space_fit(
     spec: &crate::spec::Spec,
     model: &crate::sim::FaceModel,
     calibration: &crate::observe::Calibration,

@@ -14,8 +14,9 @@ use image::RgbImage;
 mod fit;
 mod neck;
 
+pub(crate) use fit::au_space_fit;
 pub use fit::Fitted;
-use fit::{au_space_fit, aus_by_frame, landmark_fit, openface_fit};
+use fit::{aus_by_frame, landmark_fit, openface_fit};
 
 pub(crate) use neck::follow;
 use neck::{drive_neck, neck_weights, no_neck_controller};
