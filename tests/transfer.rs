@@ -230,6 +230,10 @@ fn transfer_command_writes_every_output_for_a_video() {
         stdout.contains("5 frames transferred, 1 skipped"),
         "{stdout}"
     );
+    assert!(
+        stdout.contains("method: the AU-space fit, corrected through the face (--method aus)"),
+        "{stdout}"
+    );
 
     let transferred = std::fs::read_to_string(out.join("transferred.csv")).unwrap();
     let lines: Vec<&str> = transferred.lines().collect();

@@ -88,13 +88,43 @@ pub enum TransferMethod {
 }
 
 impl TransferMethod {
-    pub fn parse(s: &str) -> Option<TransferMethod> {
-        match s {
-            "network" => Some(TransferMethod::Network),
-            "landmarks" => Some(TransferMethod::Landmarks),
-            "aus" => Some(TransferMethod::Aus),
-            _ => None,
+    /// The method `facelab transfer` uses for `input` when none is asked for: the AU fit for
+    /// an OpenFace file, the landmark fit for pictures.
+    pub fn for_input(input: &Path, asked: Option<TransferMethod>) -> Result<TransferMethod> {
+        use super::photos::{input_kind, InputKind};
+        Ok(match asked {
+            Some(m) => m,
+            None if input_kind(input)? == InputKind::OpenFace => TransferMethod::Aus,
+            None => TransferMethod::Landmarks,
+        })
+    }
+
+    /// What the method does, for a user.
+    pub fn describe(self) -> &'static str {
+        match self {
+            TransferMethod::Network => "the run's unified network on the AUs",
+            TransferMethod::Landmarks => "the landmark-space fit, corrected through the face",
+            TransferMethod::Aus => "the AU-space fit, corrected through the face",
         }
+    }
+
+    /// Its `--method` value.
+    pub fn name(self) -> &'static str {
+        match self {
+            TransferMethod::Network => "network",
+            TransferMethod::Landmarks => "landmarks",
+            TransferMethod::Aus => "aus",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<TransferMethod> {
+        [
+            TransferMethod::Network,
+            TransferMethod::Landmarks,
+            TransferMethod::Aus,
+        ]
+        .into_iter()
+        .find(|m| m.name() == s)
     }
 }
 
@@ -554,7 +584,7 @@ pub fn transfer_path(
         );
     }
     if input_kind(input)? == InputKind::OpenFace {
-        let fitted = match method.unwrap_or(TransferMethod::Aus) {
+        let fitted = match TransferMethod::for_input(input, method)? {
             TransferMethod::Network => None,
             TransferMethod::Landmarks => Some(openface_fit(input, &opts.model)?),
             TransferMethod::Aus => {
@@ -598,7 +628,7 @@ pub fn transfer_path(
     let model = spec.face_source().model()?;
     let calibration = crate::run::cell::spec_calibration(&spec)?;
     let mut landmarked = landmark_files(input, &opts.out, &model, calibration.clone(), neutral)?;
-    let fitted = match method.unwrap_or_default() {
+    let fitted = match TransferMethod::for_input(input, method)? {
         TransferMethod::Network => None,
         TransferMethod::Landmarks => Some(landmark_fit(
             &spec,

@@ -15,6 +15,13 @@ pub fn run(args: TransferArgs) -> anyhow::Result<()> {
         .or(args.openface)
         .expect("clap requires an input");
     let (model, neck) = (data_arg(args.model), args.neck.map(data_arg));
+    let method = TransferMethod::for_input(
+        &input,
+        args.method
+            .as_deref()
+            .map(|m| TransferMethod::parse(m).expect("clap checked")),
+    )?;
+    println!("method: {} (--method {})", method.describe(), method.name());
     let (summary, landmarked) = transfer_path(
         &input,
         &TransferOptions {
@@ -34,9 +41,7 @@ pub fn run(args: TransferArgs) -> anyhow::Result<()> {
         args.normalize
             .map(|n| Normalization::parse(&n).expect("clap checked")),
         args.neutral.as_deref().map(photo_neutral),
-        args.method
-            .as_deref()
-            .map(|m| TransferMethod::parse(m).expect("clap checked")),
+        Some(method),
     )?;
     if let Some(l) = &landmarked {
         print_landmarked(l);
