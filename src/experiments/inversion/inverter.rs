@@ -134,7 +134,7 @@ impl<'a> Inverter<'a> {
             let qp = BoxQp::least_squares(&self.columns, target);
             projected_newton(&qp, start, 1e-6, 200).a
         };
-        let mut x = fit(d, &vec![0.0; self.columns.len()]);
+        let x = fit(d, &vec![0.0; self.columns.len()]);
         if refinements == 0 {
             return Ok(Refined {
                 activations: activations(&x),
@@ -143,60 +143,29 @@ impl<'a> Inverter<'a> {
                 state: None,
             });
         }
-        // The faces here only estimate the basis' defect and rank the iterates; whoever
-        // takes the activations solves them again at the full tolerance.
-        let params = &SolveParams {
-            tolerance: params.tolerance * CORRECTION_LOOSENING,
-            ..*params
-        };
-        let mut best: Option<(f64, Vec<f64>, crate::sim::State)> = None;
-        let mut first_rms = None;
-        let mut last: Option<crate::sim::State> = None;
-        for step in 0..=refinements {
-            let a = activations(&x);
-            let warm = last.take().and_then(|mut state| {
-                crate::sim::solve(self.model, &a, &mut state, ws, params)
-                    .ok()
-                    .map(|_| state)
-            });
-            let solved = match warm {
-                Some(state) => Ok(state),
-                None => solve_predicted(self.model, self.basis, &a, ws, params).map(|r| r.0),
-            };
-            let state = match solved {
-                Ok(state) => state,
-                // The first fit must solve for there to be anything to correct.
-                Err(e) if step == 0 => return Err(e.into()),
-                Err(_) => break,
-            };
-            let (_, nl) = self.read(&state)?;
-            let e = rms(&nl, d);
-            first_rms.get_or_insert(e);
-            if best.as_ref().is_none_or(|b| e < b.0) {
-                best = Some((e, x.clone(), state.clone()));
-            }
-            last = Some(state);
-            if step == refinements {
-                break;
-            }
-            let target: Vec<f64> = d
-                .iter()
-                .zip(&nl)
-                .enumerate()
-                .map(|(i, (t, n))| {
-                    let linear: f64 = self.columns.iter().zip(&x).map(|(c, v)| c[i] * v).sum();
-                    t - (n - linear)
-                })
-                .collect();
-            x = fit(&target, &x);
-        }
-        let (rms_kept, x, state) = best.expect("the first step either solved or returned");
-        Ok(Refined {
-            activations: activations(&x),
-            rms: Some(rms_kept),
-            first_rms,
-            state: Some(state),
-        })
+        self.corrected(
+            x,
+            refinements,
+            ws,
+            params,
+            |_, state| {
+                let (_, nl) = self.read(state)?;
+                let e = rms(&nl, d);
+                Ok((e, e, nl))
+            },
+            |x, nl| {
+                let target: Vec<f64> = d
+                    .iter()
+                    .zip(nl)
+                    .enumerate()
+                    .map(|(i, (t, n))| {
+                        let linear: f64 = self.columns.iter().zip(x).map(|(c, v)| c[i] * v).sum();
+                        t - (n - linear)
+                    })
+                    .collect();
+                fit(&target, x)
+            },
+        )
     }
 
     /// AU-space fit of readings `r` through the basis: projected Gauss-Newton
@@ -237,15 +206,47 @@ impl<'a> Inverter<'a> {
         ws: &mut Workspace,
         params: &SolveParams,
     ) -> Result<Refined> {
+        let x = self.aus_basis(r, &vec![0.0; self.columns.len()], prior).a;
         let mut surface = Vec::new();
-        let mut x = self.aus_basis(r, &vec![0.0; self.columns.len()], prior).a;
+        self.corrected(
+            x,
+            refinements,
+            ws,
+            params,
+            |x, state| {
+                let (nl, _) = self.read(state)?;
+                let squares = nl.iter().zip(r).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+                let cost = squares + prior * x.iter().map(|v| v * v).sum::<f64>();
+                Ok((cost, (squares / AU_COUNT as f64).sqrt(), nl))
+            },
+            |x, nl| {
+                let bl = self.basis_aus(x, &mut surface);
+                let target: Vec<f64> = (0..AU_COUNT).map(|k| r[k] - (nl[k] - bl[k])).collect();
+                self.aus_basis(&target, x, prior).a
+            },
+        )
+    }
+
+    /// Defect correction through the nonlinear face, shared by the landmark and AU fits:
+    /// `refinements + 1` times the face is solved at `x` (at the loosened tolerance, from the
+    /// face before it, else from the basis prediction), `judge` gives its ranking cost, its
+    /// RMS misfit and its reading, and `refit` the next `x` from that reading. Keeps the
+    /// iterate of least cost; a face that does not solve ends the corrections (the first must
+    /// solve for there to be anything to correct).
+    fn corrected<R>(
+        &self,
+        mut x: Vec<f64>,
+        refinements: usize,
+        ws: &mut Workspace,
+        params: &SolveParams,
+        judge: impl Fn(&[f64], &crate::sim::State) -> Result<(f64, f64, R)>,
+        mut refit: impl FnMut(&[f64], &R) -> Vec<f64>,
+    ) -> Result<Refined> {
+        // The faces here only estimate the basis' defect and rank the iterates; whoever
+        // takes the activations solves them again at the full tolerance.
         let params = &SolveParams {
             tolerance: params.tolerance * CORRECTION_LOOSENING,
             ..*params
-        };
-        let misfit = |aus: &[f64], x: &[f64]| -> f64 {
-            aus.iter().zip(r).map(|(a, b)| (a - b).powi(2)).sum::<f64>()
-                + prior * x.iter().map(|v| v * v).sum::<f64>()
         };
         let mut best: Option<(f64, f64, Vec<f64>, crate::sim::State)> = None;
         let mut first_rms = None;
@@ -266,11 +267,8 @@ impl<'a> Inverter<'a> {
                 Err(e) if step == 0 => return Err(e.into()),
                 Err(_) => break,
             };
-            let (nl, _) = self.read(&state)?;
-            let e = (nl.iter().zip(r).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / AU_COUNT as f64)
-                .sqrt();
+            let (cost, e, reading) = judge(&x, &state)?;
             first_rms.get_or_insert(e);
-            let cost = misfit(&nl, &x);
             if best.as_ref().is_none_or(|b| cost < b.0) {
                 best = Some((cost, e, x.clone(), state.clone()));
             }
@@ -278,9 +276,7 @@ impl<'a> Inverter<'a> {
             if step == refinements {
                 break;
             }
-            let bl = self.basis_aus(&x, &mut surface);
-            let target: Vec<f64> = (0..AU_COUNT).map(|k| r[k] - (nl[k] - bl[k])).collect();
-            x = self.aus_basis(&target, &x, prior).a;
+            x = refit(&x, &reading);
         }
         let (_, e, x, state) = best.expect("the first step either solved or returned");
         Ok(Refined {
