@@ -8,8 +8,10 @@
 //! `invert`. Computation: `sim` (the face and the neck), `observe` (landmarks -> AUs, pose),
 //! `learn` (the MLP), `cohort`, `landmark`, `edit`, `dataset` (the training data),
 //! `headneck` (the learned neck controller), `judge` (MediaPipe's blendshapes on pictures and
-//! faces). Files: `io`. Configuration: `spec`. Output:
-//! `report`. The harness: `experiments`.
+//! faces). Files: `io`. Configuration: `spec`. Output: `report`. The harness, in three rooms:
+//! the run machinery (`run`), the transfer pipeline that commands and experiments share
+//! (`transfer`), the registered experiments (`experiments`), and the work behind the other
+//! command-line tools (`tools`).
 
 // Small dense matrix algebra reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
@@ -32,3 +34,5 @@ pub mod run;
 pub mod sim;
 pub mod spec;
 pub mod stats;
+pub mod tools;
+pub mod transfer;

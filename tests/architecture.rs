@@ -41,10 +41,38 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "transfer",
+        &[
+            "sim", "observe", "learn", "landmark", "io", "dataset", "headneck", "invert", "stats",
+            "spec", "report", "judge", "run",
+        ],
+    ),
+    (
         "experiments",
         &[
-            "sim", "observe", "learn", "cohort", "landmark", "io", "dataset", "headneck", "invert",
-            "rng", "stats", "edit", "spec", "cache", "report", "judge", "run",
+            "sim", "observe", "learn", "cohort", "io", "dataset", "headneck", "invert", "rng",
+            "stats", "spec", "cache", "report", "judge", "run", "transfer",
+        ],
+    ),
+    (
+        "tools",
+        &[
+            "sim",
+            "observe",
+            "learn",
+            "cohort",
+            "landmark",
+            "io",
+            "headneck",
+            "rng",
+            "stats",
+            "edit",
+            "spec",
+            "cache",
+            "report",
+            "judge",
+            "transfer",
+            "experiments",
         ],
     ),
 ];
@@ -56,7 +84,10 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("plotters", &["report"]),
     ("candle_core", &["learn", "landmark"]),
     ("candle_nn", &["learn"]),
-    ("image", &["io", "report", "experiments"]),
+    (
+        "image",
+        &["io", "report", "transfer", "experiments", "tools"],
+    ),
     ("indicatif", &["run"]),
 ];
 
@@ -331,6 +362,40 @@ fn a_forbidden_import_is_caught() {
     );
     // And a rule no code needs: this `sim` does not use the box solver it may.
     assert!(unused_rules(&dir).contains(&"sim -> invert".to_string()));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The harness's rules, each shown to catch its violation: an experiment that uses a
+/// command-line tool, run machinery that names an experiment, and a transfer pipeline that
+/// reaches up into the experiments it serves.
+#[test]
+fn the_harness_rules_catch_their_violations() {
+    let dir = crate::temp("architecture", "harness");
+    for (file, code) in [
+        ("experiments/table1.rs", "use crate::tools::face::pose;\n"),
+        ("run/mod.rs", "use crate::experiments::REGISTRY;\n"),
+        (
+            "transfer/mod.rs",
+            "use crate::experiments::table2::RefFrame;\n",
+        ),
+        (
+            "tools/face.rs",
+            "use crate::experiments::table2::RefFrame;\n",
+        ),
+    ] {
+        let path = dir.join(file);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, code).unwrap();
+    }
+    assert_eq!(
+        violations(&dir),
+        [
+            "experiments/table1.rs: experiments -> tools".to_string(),
+            "run/mod.rs: run -> experiments".to_string(),
+            "transfer/mod.rs: transfer -> experiments".to_string(),
+        ],
+        "the tools may use the experiments; nothing else here may"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

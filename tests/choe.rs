@@ -4,13 +4,13 @@
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-use facelab::experiments::inversion::Inverter;
 use facelab::invert::{accelerated, projected_gradient, projected_newton, Bound, BoxQp};
 use facelab::io::calibration::{default_calibration_path, read_calibration};
 use facelab::observe::landmarks;
 use facelab::sim::basis::LinearBasis;
 use facelab::sim::controls::{JAW_ROTATION, MUSCLE_COUNT};
 use facelab::sim::{solve_from_rest, Activations, SolveParams, Workspace};
+use facelab::transfer::inverter::Inverter;
 
 fn basis() -> &'static LinearBasis {
     static BASIS: OnceLock<LinearBasis> = OnceLock::new();

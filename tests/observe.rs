@@ -1,12 +1,13 @@
 //! The AU observer on the simulated face.
 
-use facelab::experiments::observe::{model_observer, observe_state};
 use facelab::io::calibration::{default_calibration_path, read_calibration};
 use facelab::io::expressions::{default_expressions_path, read_expressions};
+use facelab::observe::model_observer;
 use facelab::observe::{landmarks, Observer, AU_NAMES};
 use facelab::sim::expression::Expression;
 use facelab::sim::geom::{Rot3, V3};
 use facelab::sim::{solve_from_rest, Activations, SolveParams, Workspace};
+use facelab::tools::observe::observe_state;
 
 use super::model;
 

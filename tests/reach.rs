@@ -181,8 +181,8 @@ fn a_bad_reach_table_is_named_with_its_line() {
 
 #[test]
 fn the_gallery_refuses_a_face_whose_lips_pass_through_each_other() {
-    use facelab::experiments::face::valid_pose;
     use facelab::sim::{Activations, FaceModel, Workspace};
+    use facelab::tools::face::valid_pose;
     // Without the lip contact, zygomaticus major with the lower half of orbicularis oris
     // pushes the lower lip 2 mm through the upper one near the corners.
     let mesh = facelab::io::mesh::read_obj(&facelab::io::mesh::default_mesh_path()).unwrap();

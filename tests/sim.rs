@@ -1,6 +1,5 @@
 //! Physics of the face model: the checks of issue 2.
 
-use facelab::experiments::bench::random_samples;
 use facelab::io::expressions::{default_expressions_path, read_expressions};
 use facelab::sim::expression::Expression;
 use facelab::sim::geom::{norm, sub, V3};
@@ -9,6 +8,7 @@ use facelab::sim::validity::defects;
 use facelab::sim::{
     control_names, solve as solve_warm, solve_from_rest, Activations, SolveParams, State, Workspace,
 };
+use facelab::tools::bench::random_samples;
 
 use super::model;
 

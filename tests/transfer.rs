@@ -5,14 +5,15 @@ use std::path::{Path, PathBuf};
 
 use facelab::cohort::{clips, CohortKind, CohortParams, Subject, SubjectParams};
 use facelab::dataset::reader::{FaceReader, Source};
-use facelab::experiments::observe::model_observer;
-use facelab::experiments::table2::{au_mse, observe_clip, transfer};
+use facelab::experiments::table2::observe_clip;
 use facelab::io::face::FaceSource;
 use facelab::io::observer_fit::read_any_calibration;
 use facelab::learn::Mlp;
+use facelab::observe::model_observer;
 use facelab::observe::Calibration;
 use facelab::observe::AU_COUNT;
 use facelab::sim::{SolveParams, Workspace};
+use facelab::transfer::network::{au_mse, transfer};
 
 use crate::{facelab, openface_file, root, Frame};
 
@@ -185,7 +186,7 @@ fn joy_file(dir: &Path, frames: usize) -> PathBuf {
     let model = crate::model();
     let observer = model_observer(model, paper_calibration()).unwrap();
     let weights = FaceSource::default().weights().unwrap();
-    let joy = facelab::experiments::observe::observe_activations(
+    let joy = facelab::tools::observe::observe_activations(
         model,
         &observer,
         &weights.activations(facelab::sim::expression::Expression::Joy, 1.0),

@@ -130,9 +130,9 @@ impl FaceReader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::experiments::observe::model_observer;
     use crate::io::calibration::{default_calibration_path, read_calibration};
     use crate::io::face::FaceSource;
+    use crate::observe::model_observer;
     use crate::observe::pose::HeadPose;
     use crate::sim::expression::Expression;
     use crate::sim::{solve_from_rest, SolveParams, Workspace};

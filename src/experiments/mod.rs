@@ -1,21 +1,14 @@
-//! The harness: commands that put the simulator, the observer and the reports together.
+//! The registered experiments, one folder or file each with its model, stages and report:
+//! the tables and figures a spec's `tables` list asks for. The run machinery (`crate::run`)
+//! runs them through [`REGISTRY`] and names none of them.
 
-pub mod bench;
-pub mod editing;
-pub mod face;
-pub mod fidelity;
 pub mod headpose;
 pub mod inversion;
-pub mod observe;
-pub mod photo_table;
 pub mod photos;
 pub mod pose_transfer;
-pub mod reach;
 pub mod realfaces;
 pub mod table1;
 pub mod table2;
-pub mod table2_stage;
-pub mod transfer;
 
 use crate::run::cell::{Experiment, Registry};
 
@@ -26,11 +19,11 @@ use crate::run::cell::{Experiment, Registry};
 const EXPERIMENTS: &[&dyn Experiment] = &[
     &headpose::Headpose,
     &table1::Table1,
-    &table2_stage::Table2,
+    &table2::Table2,
     &inversion::Inversion,
     &pose_transfer::PoseTransfer,
     &realfaces::Realfaces,
-    &photo_table::Photos,
+    &photos::Photos,
 ];
 
 /// The registry a run is handed ([`crate::run::RunOptions::registry`]).

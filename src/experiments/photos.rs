@@ -1,669 +1,514 @@
-//! Photos and videos in: any input `facelab observe` and `facelab transfer` take, told apart
-//! by content (an OpenFace CSV, a PNG/JPEG/GIF image, a folder of frames, or a video that
-//! `ffmpeg` decodes), through the built-in landmarker (`crate::landmark`) to OpenFace-layout
-//! rows: the 68 iBUG landmarks in 2D (pixels) and 3D (OpenFace's camera frame, mm), the head
-//! pose, and the 17 AUs read by our observer from the face fitted into the model's frame.
+//! The real-photo table (`tables = ["photos"]`): every committed licensed real picture of
+//! `experiments/photos.csv` onto the face by three methods, judged two ways. The methods:
+//! `network`, the cell's first unified network on the AUs facelab's observer reads in the
+//! picture (against the model's rest face, as `facelab transfer PHOTO` reads one photo);
+//! `landmarks`, the landmark-space fit of the inversion table (Choe et al.'s eq. 10 with the
+//! box: the activations whose linear-basis face moves the 68 landmarks as the picture's moved
+//! from the model's rest face); and `aus`, the AU-space fit of those AUs (with the prior
+//! `AU_PRIOR` toward rest); both fits corrected through the nonlinear face, then solved. The judges: facelab's observer
+//! reads the transferred face's AUs; MediaPipe's blendshapes (`crate::judge`) read the picture
+//! and the transferred face, rendered frontally (`render`) and from its projected vertices
+//! (`mesh`). The face is solved without the neck (the expression alone).
 //!
-//! The observer reads each frame exactly as it reads the simulated face: the 468 points are
-//! fitted onto the model's rest surface (`landmark::metric`), the 68 landmarks taken through
-//! the iBUG map, and measured against a neutral face. For one photo that neutral is the
-//! model's own rest face (a single picture has no neutral of its own); for a clip or folder
-//! it is the person's: the per-landmark median over the frames with a face, as OpenFace
-//! files are read (`--neutral` chooses).
+//! Writes `photos.csv` into the run folder (per picture, method and reading: the AUs and
+//! blendshape groups in and out), `photos.md` into the tables folder, and
+//! `figures/photos/<picture>.png`: the picture, cut to the face, beside its three transferred
+//! faces (network, landmarks, AUs). Stage key (`photos`): the pictures' and the list's content, and the keys of the
+//! first seed's unified network and of the basis.
 
-use std::io::Read;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 
-use crate::io::blendshapes::blendshapes_csv;
-use crate::io::openface::FaceRow;
-use crate::io::photo::decode_rgb;
-use crate::io::rows::{self, num, CsvRow};
-use crate::landmark::{metric, Blendshapes, FaceMesh, Landmarker, RgbFrame, MESH_POINTS};
-use crate::observe::{landmarks, Calibration, Observer, AU_COUNT, LANDMARK_COUNT};
-use crate::sim::geom::V3;
-use crate::sim::FaceModel;
+use crate::cache::{self, Entry};
+use crate::judge::{
+    group_agreement, groups, verdict, Groups, Judge, Reading, ABSENT, GROUPS, GROUP_LABELS, SHOWN,
+};
+use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
+use crate::report::compose::{png_bytes, side_by_side};
+use crate::report::render::{render, RenderOptions};
+use crate::run::cell::{spec_calibration, CellRun, Experiment, Plan};
+use crate::run::stage::{text, Artifact, Unit};
+use crate::sim::basis::LinearBasis;
+use crate::sim::{solve_from_rest, SolveParams, Workspace};
+use crate::transfer::inverter::{flat, Inverter, AU_PRIOR};
+use crate::transfer::network::predict_activations;
+use crate::transfer::pictures::{
+    face_window, landmark_frames, observer_for, read_frames, InputKind, PhotoNeutral,
+};
 
-/// Millimetres per model unit (the model is in centimetres).
-const MM: f64 = 10.0;
+// 1: first version. 2: the landmark-space method beside the network. 3: the landmark fit
+// corrected through the nonlinear face (`inversion.refinements` times). 4: the renders' neck
+// runs 6.5 cm below the chin onto shoulders. 5: the landmark fit by projected Newton, its
+// corrections solved warm at a loosened tolerance. 6: the AU-space fit as a third method.
+const PHOTOS_VERSION: u32 = 6;
 
-/// What a path holds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum InputKind {
-    OpenFace,
-    Image,
-    Gif,
-    Folder,
-    Video,
-}
+/// The transfer methods, in table order.
+pub const METHODS: [&str; 3] = ["network", "landmarks", "aus"];
 
-/// Tells an input's kind from its content: a folder; an image by its signature (PNG, JPEG,
-/// GIF); an OpenFace CSV by its header (a first line naming `AU` or `frame` columns); anything
-/// else is offered to `ffmpeg` as a video.
-pub fn input_kind(path: &Path) -> Result<InputKind> {
-    let meta =
-        std::fs::metadata(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    if meta.is_dir() {
-        return Ok(InputKind::Folder);
-    }
-    if meta.len() == 0 {
-        bail!("{}: empty file (0 bytes)", path.display());
-    }
-    let mut head = vec![0u8; 4096];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| f.read(&mut head))
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    head.truncate(n);
-    if let Ok(format) = image::guess_format(&head) {
-        return Ok(match format {
-            image::ImageFormat::Gif => InputKind::Gif,
-            _ => InputKind::Image,
-        });
-    }
-    let first = head.split(|b| *b == b'\n').next().unwrap_or(&[]);
-    if let Ok(line) = std::str::from_utf8(first) {
-        if line.contains(',')
-            && (line.contains("AU") || line.contains("frame") || line.contains("face"))
-        {
-            return Ok(InputKind::OpenFace);
-        }
-    }
-    Ok(InputKind::Video)
-}
+/// The list of pictures, relative to the checkout.
+pub const PHOTOS_LIST: &str = "experiments/photos.csv";
 
-/// Which neutral face the AUs are measured against.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PhotoNeutral {
-    /// The model's rest face.
-    Model,
-    /// The per-landmark median of the input's frames with a face.
-    Median,
-    /// One frame (0-based index into the input).
-    Frame(usize),
-}
-
-/// One input frame through the landmarker.
+/// One listed picture.
 #[derive(Clone, Debug)]
-pub struct LandmarkedFrame {
-    /// The 468 points in image pixels (z scaled like x), `None` when no face was found.
-    pub mesh: Option<FaceMesh>,
-    /// The fit into the model's frame.
-    pub metric: Option<metric::MetricFace>,
-    /// MediaPipe's 52 blendshape scores of the face (Face Mesh v2 landmarks only).
-    pub blendshapes: Option<Blendshapes>,
-    /// Faces found by the detector in this frame (when it ran).
-    pub faces_found: usize,
+pub struct Picture {
+    pub file: String,
+    pub shows: String,
+    pub path: PathBuf,
 }
 
-/// The frames of an input and what the landmarker found in each.
-pub struct Landmarked {
-    pub kind: InputKind,
-    pub width: usize,
-    pub height: usize,
-    /// Frames per second (videos and GIFs; 30 for folders, 0 for a photo).
-    pub fps: f64,
-    pub frames: Vec<RgbFrame>,
-    pub found: Vec<LandmarkedFrame>,
-    /// Warnings to show the user (frames without a face, several faces).
-    pub warnings: Vec<String>,
-}
-
-/// Reads every frame of an image input (not an OpenFace file).
-pub fn read_frames(path: &Path, kind: InputKind) -> Result<(Vec<RgbFrame>, f64)> {
-    match kind {
-        InputKind::Image => {
-            let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-            let frame = decode_rgb(&bytes).map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?;
-            Ok((vec![frame], 0.0))
-        }
-        InputKind::Gif => Ok(crate::io::photo::read_gif(path)?),
-        InputKind::Folder => read_folder(path),
-        InputKind::Video => read_video(path),
-        InputKind::OpenFace => bail!(
-            "{}: an OpenFace CSV, not a picture (`facelab observe --openface FILE` reads its landmarks)",
-            path.display()
-        ),
+impl Picture {
+    pub fn stem(&self) -> &str {
+        let name = self.file.rsplit('/').next().unwrap_or(&self.file);
+        name.rsplit_once('.').map_or(name, |(s, _)| s)
     }
 }
 
-/// The images of a folder in name order (PNG, JPEG, GIF by content; other files ignored).
-fn read_folder(path: &Path) -> Result<(Vec<RgbFrame>, f64)> {
-    let mut names: Vec<PathBuf> = std::fs::read_dir(path)
-        .with_context(|| format!("{}: cannot list", path.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file())
-        .collect();
-    names.sort();
-    let mut frames = Vec::new();
-    for p in names {
-        let bytes = std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?;
-        if image::guess_format(&bytes).is_err() {
+/// The pictures of `experiments/photos.csv` (`file,shows,licence`; `#` lines are comments).
+pub fn pictures() -> Result<Vec<Picture>> {
+    let list = crate::io::data_path(PHOTOS_LIST);
+    let text = std::fs::read_to_string(&list)
+        .with_context(|| format!("{}: cannot read", list.display()))?;
+    let mut out = Vec::new();
+    let mut header = true;
+    for (i, line) in text.lines().enumerate() {
+        if line.starts_with('#') || line.trim().is_empty() {
             continue;
         }
-        let frame = decode_rgb(&bytes).map_err(|m| anyhow::anyhow!("{}: {m}", p.display()))?;
-        if let Some(first) = frames.first() {
-            let first: &RgbFrame = first;
-            if (first.width, first.height) != (frame.width, frame.height) {
+        if header {
+            if line.trim() != "file,shows,licence" {
                 bail!(
-                    "{}: {}x{} pixels, the folder's first image is {}x{}",
-                    p.display(),
-                    frame.width,
-                    frame.height,
-                    first.width,
-                    first.height
+                    "{}:{}: expected the header `file,shows,licence`",
+                    list.display(),
+                    i + 1
                 );
             }
-        }
-        frames.push(frame);
-    }
-    if frames.is_empty() {
-        bail!(
-            "{}: a folder with no images (PNG, JPEG or GIF)",
-            path.display()
-        );
-    }
-    Ok((frames, 30.0))
-}
-
-fn ffmpeg_missing(path: &Path, tool: &str) -> anyhow::Error {
-    anyhow::anyhow!(
-        "{}: not an image or OpenFace CSV, so read as a video, which needs `{tool}` on PATH \
-         (Debian/Ubuntu: `apt-get install ffmpeg`)",
-        path.display()
-    )
-}
-
-/// Decodes a video with ffmpeg (size and frame rate from ffprobe), frames as RGB.
-fn read_video(path: &Path) -> Result<(Vec<RgbFrame>, f64)> {
-    let probe = Command::new("ffprobe")
-        .args([
-            "-v",
-            "error",
-            "-select_streams",
-            "v:0",
-            "-show_entries",
-            "stream=width,height,r_frame_rate",
-            "-of",
-            "csv=p=0",
-        ])
-        .arg(path)
-        .output()
-        .map_err(|_| ffmpeg_missing(path, "ffprobe"))?;
-    let text = String::from_utf8_lossy(&probe.stdout);
-    let line = text.lines().next().unwrap_or("").trim();
-    if !probe.status.success() || line.is_empty() {
-        bail!(
-            "{}: not an image, OpenFace CSV or video with a video stream{}",
-            path.display(),
-            match String::from_utf8_lossy(&probe.stderr).lines().next() {
-                Some(e) if !e.is_empty() => format!(" (ffprobe: {e})"),
-                _ => String::new(),
-            }
-        );
-    }
-    let cells: Vec<&str> = line.split(',').collect();
-    let parse = |s: &str| s.trim().parse::<usize>().ok();
-    let (w, h) = match (
-        cells.first().and_then(|s| parse(s)),
-        cells.get(1).and_then(|s| parse(s)),
-    ) {
-        (Some(w), Some(h)) if w >= 2 && h >= 2 => (w, h),
-        _ => bail!("{}: ffprobe gave no frame size (`{line}`)", path.display()),
-    };
-    let fps = cells
-        .get(2)
-        .and_then(|r| {
-            let (a, b) = r.split_once('/')?;
-            let (a, b) = (a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?);
-            (b > 0.0 && a > 0.0).then_some(a / b)
-        })
-        .unwrap_or(30.0);
-    let out = Command::new("ffmpeg")
-        .args(["-v", "error", "-nostdin", "-i"])
-        .arg(path)
-        .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", "rgb24", "-"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .output()
-        .map_err(|_| ffmpeg_missing(path, "ffmpeg"))?;
-    if !out.status.success() {
-        bail!(
-            "{}: ffmpeg cannot decode it: {}",
-            path.display(),
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
-    }
-    let size = w * h * 3;
-    let frames: Vec<RgbFrame> = out
-        .stdout
-        .chunks_exact(size)
-        .map(|c| RgbFrame::new(w, h, c.to_vec()))
-        .collect();
-    if frames.is_empty() {
-        bail!("{}: the video stream has no frames", path.display());
-    }
-    Ok((frames, fps))
-}
-
-/// Runs the landmarker over every frame: for a video or GIF, detection on the first frame and
-/// whenever the face is lost, tracking from the previous frame's landmarks otherwise
-/// (MediaPipe's video mode); a folder's pictures are each detected. A frame with several
-/// faces takes the largest.
-pub fn landmark_frames(
-    landmarker: &Landmarker,
-    model: &FaceModel,
-    kind: InputKind,
-    frames: Vec<RgbFrame>,
-    fps: f64,
-    name: &str,
-) -> Result<Landmarked> {
-    let rest = model.rest_state();
-    let rest = rest.surface(model.vertex_count());
-    let mut found = Vec::with_capacity(frames.len());
-    let mut warnings = Vec::new();
-    let mut previous: Option<FaceMesh> = None;
-    let mut missing = Vec::new();
-    for (i, frame) in frames.iter().enumerate() {
-        // A folder holds separate pictures: each is detected (MediaPipe's static mode).
-        let tracked = match &previous {
-            Some(p) if kind != InputKind::Folder => landmarker.track(frame, p)?,
-            _ => None,
-        };
-        let (mesh, faces_found) = match tracked {
-            Some(m) => (Some(m), 1),
-            None => {
-                let faces = landmarker.faces(frame)?;
-                if faces.len() > 1 {
-                    warnings.push(format!(
-                        "{name}: frame {i}: {} faces, took the largest",
-                        faces.len()
-                    ));
-                }
-                let n = faces.len();
-                (faces.into_iter().next().map(|f| f.mesh), n)
-            }
-        };
-        if mesh.is_none() {
-            missing.push(i);
-        }
-        let metric = mesh.as_ref().map(|m| metric::fit(&m.points, rest));
-        let blendshapes = match &mesh {
-            Some(m) => landmarker.blendshapes(m)?,
-            None => None,
-        };
-        previous = mesh.clone();
-        found.push(LandmarkedFrame {
-            mesh,
-            metric,
-            blendshapes,
-            faces_found,
-        });
-    }
-    if !missing.is_empty() {
-        let list: Vec<String> = missing.iter().take(10).map(|i| i.to_string()).collect();
-        warnings.push(format!(
-            "{name}: no face in {} of {} frames (success = 0): {}{}",
-            missing.len(),
-            frames.len(),
-            list.join(", "),
-            if missing.len() > 10 { ", ..." } else { "" }
-        ));
-    }
-    let (width, height) = (frames[0].width, frames[0].height);
-    Ok(Landmarked {
-        kind,
-        width,
-        height,
-        fps,
-        frames,
-        found,
-        warnings,
-    })
-}
-
-/// The 68 iBUG landmarks of a fitted face, in the model's frame.
-fn model_landmarks(face: &metric::MetricFace) -> [V3; LANDMARK_COUNT] {
-    landmarks(&face.points)
-}
-
-/// The observer for these frames' AUs (see the module notes for the neutral face).
-pub fn observer_for(
-    model: &FaceModel,
-    found: &[LandmarkedFrame],
-    neutral: PhotoNeutral,
-    calibration: Calibration,
-) -> Result<Observer> {
-    let faces: Vec<[V3; LANDMARK_COUNT]> = found
-        .iter()
-        .filter_map(|f| f.metric.as_ref().map(model_landmarks))
-        .collect();
-    let neutral_face = match neutral {
-        PhotoNeutral::Model => {
-            let rest = model.rest_state();
-            landmarks(rest.surface(model.vertex_count()))
-        }
-        PhotoNeutral::Median => {
-            if faces.is_empty() {
-                bail!("no frame with a face to take the neutral from");
-            }
-            super::observe::median_face(&faces)
-        }
-        PhotoNeutral::Frame(i) => match found.get(i).and_then(|f| f.metric.as_ref()) {
-            Some(m) => model_landmarks(m),
-            None => bail!("--neutral-frame {i}: no such frame with a face"),
-        },
-    };
-    Ok(Observer::new(&neutral_face, calibration)?)
-}
-
-/// OpenFace-layout rows: one per frame, `success = 0` where no face was found.
-pub fn openface_rows(l: &Landmarked, observer: &Observer) -> Result<Vec<FaceRow>> {
-    let map = crate::observe::landmarks::landmark_vertices();
-    let mut rows = Vec::with_capacity(l.found.len());
-    for (i, f) in l.found.iter().enumerate() {
-        let timestamp = if l.fps > 0.0 { i as f64 / l.fps } else { 0.0 };
-        let base = FaceRow {
-            line: i + 2,
-            frame: i as i64 + 1,
-            face_id: Some(0),
-            timestamp: Some(timestamp),
-            confidence: 0.0,
-            success: false,
-            aus: [0.0; AU_COUNT],
-            pose: None,
-            landmarks_2d: None,
-            landmarks_3d: None,
-        };
-        let (Some(mesh), Some(m)) = (&f.mesh, &f.metric) else {
-            rows.push(FaceRow {
-                pose: Some([0.0; 6]),
-                landmarks_2d: Some(Box::new([[0.0; 2]; LANDMARK_COUNT])),
-                landmarks_3d: Some(Box::new([[0.0; 3]; LANDMARK_COUNT])),
-                ..base
-            });
+            header = false;
             continue;
-        };
-        let model68 = model_landmarks(m);
-        let o = observer
-            .observe(&model68)
-            .with_context(|| format!("frame {i}"))?;
-        let pixels: [[f64; 2]; LANDMARK_COUNT] = std::array::from_fn(|k| {
-            let vs = &map[k];
-            let mut p = [0.0; 2];
-            for &v in vs {
-                p[0] += mesh.points[v][0] / vs.len() as f64;
-                p[1] += mesh.points[v][1] / vs.len() as f64;
-            }
-            p
+        }
+        let cells: Vec<&str> = line.splitn(3, ',').collect();
+        if cells.len() != 3 || cells[0].is_empty() {
+            bail!(
+                "{}:{}: expected `file,shows,licence`",
+                list.display(),
+                i + 1
+            );
+        }
+        out.push(Picture {
+            file: cells[0].to_string(),
+            shows: cells[1].to_string(),
+            path: crate::io::data_path(cells[0]),
         });
-        // OpenFace's camera frame (mm, +y down, +z away): the model-frame landmarks turned by
-        // the head pose, placed where the face is in the image at the fitted scale (x, y from
-        // the image centre; weak perspective, so no depth: Tz is 0).
-        let turn = m.pose.rotation();
-        let mm = MM * m.scale;
-        let center = mesh.rect.center;
-        let t = [
-            (center[0] - l.width as f64 / 2.0) * mm,
-            (center[1] - l.height as f64 / 2.0) * mm,
-            0.0,
+    }
+    if out.is_empty() {
+        bail!("{}: lists no picture", list.display());
+    }
+    Ok(out)
+}
+
+/// The list's and every picture's content, as key text.
+fn content(pictures: &[Picture], refinements: usize) -> Result<String> {
+    let list = crate::io::data_path(PHOTOS_LIST);
+    let mut content = format!(
+        "list={}\nrefinements={refinements}\n",
+        cache::sha256(&std::fs::read(&list).with_context(|| list.display().to_string())?)
+    );
+    for p in pictures {
+        let bytes =
+            std::fs::read(&p.path).with_context(|| format!("{}: cannot read", p.path.display()))?;
+        content.push_str(&format!("{}={}\n", p.file, cache::sha256(&bytes)));
+    }
+    Ok(content)
+}
+
+fn unit(content: &str, train_key: &str, basis_key: Option<&str>) -> Unit {
+    let mut deps = vec![train_key];
+    deps.extend(basis_key);
+    Unit::new("photos", PHOTOS_VERSION, &content, &deps)
+}
+
+/// What the stage keeps: `photos.csv` and one figure per picture.
+struct PhotoFiles {
+    csv: String,
+    figures: Vec<(String, Vec<u8>)>,
+}
+
+impl Artifact for PhotoFiles {
+    fn encode(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        let names: Vec<&str> = self.figures.iter().map(|(n, _)| n.as_str()).collect();
+        let mut out = vec![
+            ("photos.csv".to_string(), self.csv.clone().into_bytes()),
+            ("figures.txt".to_string(), names.join("\n").into_bytes()),
         ];
-        let camera: [V3; LANDMARK_COUNT] = std::array::from_fn(|k| {
-            let q = turn.apply(model68[k]);
-            [q[0] * MM + t[0], -q[1] * MM + t[1], -q[2] * MM + t[2]]
-        });
-        let p = m.pose;
-        rows.push(FaceRow {
-            confidence: mesh.score,
-            success: true,
-            aus: o.aus,
-            pose: Some([t[0], t[1], t[2], p.pitch, p.yaw, p.roll]),
-            landmarks_2d: Some(Box::new(pixels)),
-            landmarks_3d: Some(Box::new(camera)),
-            ..base
+        out.extend(self.figures.iter().cloned());
+        Ok(out)
+    }
+    fn decode(entry: &Entry) -> Result<Self> {
+        let csv = text(entry, "photos.csv")?;
+        let mut figures = Vec::new();
+        for name in text(entry, "figures.txt")?.lines() {
+            figures.push((name.to_string(), entry.read(name)?));
+        }
+        Ok(PhotoFiles { csv, figures })
+    }
+}
+
+/// The real-photo table in the registry.
+pub(crate) struct Photos;
+
+impl Experiment for Photos {
+    fn name(&self) -> &'static str {
+        "photos"
+    }
+
+    fn first_seed_only(&self) -> bool {
+        true
+    }
+
+    fn plan(&self, plan: &mut Plan) -> Result<()> {
+        let content = content(&pictures()?, plan.spec.inversion.refinements)?;
+        let k = plan.keys();
+        let Some((_, train_key)) = k.unified().into_iter().next() else {
+            bail!("the photo table needs a unified network (table1's training)");
+        };
+        let u = unit(&content, train_key, k.basis.as_deref());
+        plan.add("photos", u);
+        Ok(())
+    }
+
+    fn run(&self, cx: &mut CellRun) -> Result<()> {
+        let list = pictures()?;
+        let spec = cx.spec;
+        let content = content(&list, spec.inversion.refinements)?;
+        let (n, k, model, basis) = (cx.networks()?, cx.keys()?, cx.model()?, cx.basis()?);
+        let (_, train_key, mlp) = n
+            .unified(&k)
+            .into_iter()
+            .next()
+            .context("the photo table needs a unified network")?;
+        let calibration = spec_calibration(spec)?;
+        let params = SolveParams {
+            tolerance: spec.dataset.tolerance,
+            ..SolveParams::default()
+        };
+        let key = unit(&content, &train_key, k.basis.as_deref());
+        let made = cx.stages().get_or_compute(&key, |_| {
+            let built;
+            let basis = match basis.as_ref() {
+                Some(b) => b,
+                None => {
+                    built = LinearBasis::build(&model, &params)?;
+                    &built
+                }
+            };
+            let inverter = Inverter::new(&model, basis, &calibration)?;
+            let judge = Judge::new()?;
+            let landmarker = judge.landmarker();
+            let options = RenderOptions::default();
+            let mut ws = Workspace::new(&model)?;
+            let mut rows = Vec::new();
+            let mut figures = Vec::new();
+            for p in &list {
+                let (frames, _) = read_frames(&p.path, InputKind::Image)?;
+                let l =
+                    landmark_frames(landmarker, &model, InputKind::Image, frames, 0.0, &p.file)?;
+                let found = &l.found[0];
+                let (Some(metric), Some(scores_in)) = (&found.metric, found.blendshapes) else {
+                    bail!("{}: no face found", p.file);
+                };
+                let observer =
+                    observer_for(&model, &l.found, PhotoNeutral::Model, calibration.clone())?;
+                let points = landmarks(&metric.points);
+                let aus_in = observer.observe(&points)?.aus;
+                let network = predict_activations(mlp, None, &[aus_in])?.remove(0);
+                let d = flat(&inverter.observer.displacements(&points)?);
+                let fitted = inverter
+                    .landmarks_refined(&d, spec.inversion.refinements, &mut ws, &params)
+                    .with_context(|| format!("{}: the landmark fit's face", p.file))?
+                    .activations;
+                let au_fitted = inverter
+                    .aus_refined(
+                        &aus_in,
+                        AU_PRIOR,
+                        spec.inversion.refinements,
+                        &mut ws,
+                        &params,
+                    )
+                    .with_context(|| format!("{}: the AU fit's face", p.file))?
+                    .activations;
+                let mut faces = Vec::new();
+                for (method, a) in METHODS.iter().zip([network, fitted, au_fitted]) {
+                    let (state, _) = solve_from_rest(&model, &a, &mut ws, &params)
+                        .with_context(|| format!("{}: solving the {method} face", p.file))?;
+                    let surface = state.surface(model.vertex_count());
+                    let aus_out = observer.observe(&landmarks(surface))?.aus;
+                    for reading in [Reading::Render, Reading::Mesh] {
+                        let out = judge.face(&model, &state, &options, reading)?;
+                        rows.push(Row {
+                            file: p.file.clone(),
+                            method,
+                            reading,
+                            aus_in,
+                            aus_out,
+                            groups_in: groups(&scores_in),
+                            groups_out: out.as_ref().map(groups),
+                        });
+                    }
+                    faces.push(render(&model, &state, &options));
+                }
+                let [x, y, w, h] = face_window(&l);
+                let frame = &l.frames[0];
+                let whole = image::RgbImage::from_raw(
+                    frame.width as u32,
+                    frame.height as u32,
+                    frame.data.clone(),
+                )
+                .context("an RGB frame's pixels")?;
+                let picture = image::imageops::crop_imm(&whole, x, y, w, h).to_image();
+                let all = faces
+                    .iter()
+                    .fold(picture, |row, face| side_by_side(&row, face));
+                figures.push((format!("{}.png", p.stem()), png_bytes(&all)?));
+            }
+            Ok(PhotoFiles {
+                csv: csv(&rows),
+                figures,
+            })
+        })?;
+        cx.output("photos.csv", made.csv.clone())?;
+        let rows = from_csv(&made.csv)?;
+        cx.table("photos.md", &markdown(&rows, &list, spec))?;
+        if let Some(dir) = cx.figures("photos") {
+            std::fs::create_dir_all(&dir)
+                .with_context(|| format!("{}: cannot create", dir.display()))?;
+            for (name, bytes) in &made.figures {
+                crate::io::atomic::write_atomic(&dir.join(name), bytes)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One picture read one way.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    pub file: String,
+    pub method: &'static str,
+    pub reading: Reading,
+    pub aus_in: [f64; AU_COUNT],
+    pub aus_out: [f64; AU_COUNT],
+    /// MediaPipe's blendshape groups of the picture and of the transferred face (`None`:
+    /// no face found in the render), in `judge::GROUPS` order.
+    pub groups_in: Groups,
+    pub groups_out: Option<Groups>,
+}
+
+fn csv(rows: &[Row]) -> String {
+    let mut text = String::from("file,method,reading,success_out");
+    for a in AU_NAMES {
+        text.push_str(&format!(",{a}_in,{a}_out"));
+    }
+    for g in GROUP_LABELS {
+        text.push_str(&format!(",{g}_in,{g}_out"));
+    }
+    text.push('\n');
+    for r in rows {
+        text.push_str(&format!(
+            "{},{},{},{}",
+            r.file,
+            r.method,
+            r.reading.name(),
+            u8::from(r.groups_out.is_some())
+        ));
+        for k in 0..AU_COUNT {
+            text.push_str(&format!(",{:.4},{:.4}", r.aus_in[k], r.aus_out[k]));
+        }
+        let (gin, gout) = (r.groups_in, r.groups_out);
+        for g in 0..GROUPS.len() {
+            text.push_str(&format!(
+                ",{:.4},{}",
+                gin[g],
+                gout.map_or(String::new(), |o| format!("{:.4}", o[g]))
+            ));
+        }
+        text.push('\n');
+    }
+    text
+}
+
+/// The rows back from `photos.csv` (groups stand in for the 52 scores: only they are kept).
+fn from_csv(text: &str) -> Result<Vec<Row>> {
+    let mut rows = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let c: Vec<&str> = line.split(',').collect();
+        let want = 4 + 2 * AU_COUNT + 2 * GROUPS.len();
+        if c.len() != want {
+            bail!("photos.csv:{}: {} cells, expected {want}", i + 1, c.len());
+        }
+        let num = |s: &str| -> Result<f64> {
+            s.parse()
+                .with_context(|| format!("photos.csv:{}: `{s}` is not a number", i + 1))
+        };
+        let method = METHODS
+            .iter()
+            .find(|m| **m == c[1])
+            .with_context(|| format!("photos.csv:{}: unknown method `{}`", i + 1, c[1]))?;
+        let c = &c[1..];
+        let reading = match c[1] {
+            "render" => Reading::Render,
+            "mesh" => Reading::Mesh,
+            other => bail!("photos.csv:{}: unknown reading `{other}`", i + 1),
+        };
+        let mut aus_in = [0.0; AU_COUNT];
+        let mut aus_out = [0.0; AU_COUNT];
+        for k in 0..AU_COUNT {
+            aus_in[k] = num(c[3 + 2 * k])?;
+            aus_out[k] = num(c[4 + 2 * k])?;
+        }
+        let base = 3 + 2 * AU_COUNT;
+        let mut groups_in = [0.0; GROUPS.len()];
+        let mut groups_out = [0.0; GROUPS.len()];
+        for g in 0..GROUPS.len() {
+            groups_in[g] = num(c[base + 2 * g])?;
+            if c[2] == "1" {
+                groups_out[g] = num(c[base + 2 * g + 1])?;
+            }
+        }
+        rows.push(Row {
+            file: line.split(',').next().unwrap_or_default().to_string(),
+            method,
+            reading,
+            aus_in,
+            aus_out,
+            groups_in,
+            groups_out: (c[2] == "1").then_some(groups_out),
         });
     }
     Ok(rows)
 }
 
-/// A line of `landmarks.csv`.
-#[derive(serde::Serialize, serde::Deserialize)]
-struct LandmarkLine {
-    frame: usize,
-    vertex: usize,
-    #[serde(serialize_with = "num::fixed::<2, _>")]
-    x: f64,
-    #[serde(serialize_with = "num::fixed::<2, _>")]
-    y: f64,
-    #[serde(serialize_with = "num::fixed::<2, _>")]
-    z: f64,
+/// An AU at or below this in the picture should stay at or below [`RAISED`] on the face.
+const ABSENT_AU: f64 = 0.5;
+const RAISED: f64 = 1.0;
+/// An AU at or above this in the picture should come out at [`KEPT`] of it or more.
+const STRONG: f64 = 2.0;
+const KEPT: f64 = 0.7;
+
+/// The AUs a row's picture does not show that its face raises.
+fn absent_raised(r: &Row) -> impl Iterator<Item = usize> + '_ {
+    (0..AU_COUNT).filter(|&k| r.aus_in[k] <= ABSENT_AU && r.aus_out[k] > RAISED)
 }
 
-impl CsvRow for LandmarkLine {}
+/// The strong AUs of a row's picture that its face does not keep.
+fn strong_lost(r: &Row) -> impl Iterator<Item = usize> + '_ {
+    (0..AU_COUNT).filter(|&k| r.aus_in[k] >= STRONG && r.aus_out[k] < KEPT * r.aus_in[k])
+}
 
-/// `landmarks.csv`: `frame,vertex,x,y,z` for every frame with a face (x, y in pixels, z scaled
-/// like x, as MediaPipe gives them).
-pub fn landmarks_csv(l: &Landmarked) -> String {
-    let mut lines = Vec::new();
-    for (i, f) in l.found.iter().enumerate() {
-        if let Some(m) = &f.mesh {
-            for (vertex, p) in m.points.iter().take(MESH_POINTS).enumerate() {
-                lines.push(LandmarkLine {
-                    frame: i + 1,
-                    vertex,
-                    x: p[0],
-                    y: p[1],
-                    z: p[2],
-                });
+fn or_none(v: Vec<String>) -> String {
+    if v.is_empty() {
+        "none".to_string()
+    } else {
+        v.join("; ")
+    }
+}
+
+/// `photos.md`: per picture and method, what the judge sees in and out (render reading),
+/// facelab's AUs, and a summary per method.
+fn markdown(rows: &[Row], list: &[Picture], spec: &crate::spec::Spec) -> String {
+    let mut md = format!(
+        "# Real pictures through the face (`{}`)\n\n\
+         Each committed real picture (`{PHOTOS_LIST}`) goes onto the face (no neck: the \
+         expression alone) by three methods: `network`, the spec's first unified network on \
+         the AUs facelab's observer reads in the picture against the model's rest face; \
+         `landmarks`, the landmark-space fit of the inversion table (the activations whose \
+         linear-basis face moves the 68 landmarks as the picture's moved from the model's \
+         rest face, within the box), corrected through the nonlinear face (what `facelab \
+         transfer PHOTO` does); and `aus`, the AU-space fit (the activations whose face \
+         facelab's observer reads as the picture's AUs, with a small prior toward rest), \
+         corrected the same way. MediaPipe's blendshapes judge the picture and the transferred face, \
+         rendered frontally, in groups of left and right averaged (the reading of the \
+         projected vertices, `mesh`, is in the run folder's `photos.csv`). A group is shown at \
+         >= {SHOWN} and absent below {ABSENT}; *kept* counts the shown groups the face \
+         reproduces within 0.1, *added* the groups the face shows that the picture does not. \
+         The last two columns are facelab's own AUs, in and out.\n\n",
+        spec.experiment
+    );
+    md.push_str(
+        "| picture | shows | method | groups shown in -> out | kept | added (out) | mean abs diff (shown) | AUs <= 0.5 in, out > 1.0 | AUs >= 2 in, out below 70% |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows.iter().filter(|r| r.reading == Reading::Render) {
+        let p = list.iter().find(|p| p.file == r.file);
+        let gin = &r.groups_in;
+        let (shown, kept, added, diff) = match &r.groups_out {
+            Some(out) => {
+                let v = verdict(&group_agreement(&[Some(*gin)], &[Some(*out)]));
+                let shown: Vec<String> = (0..GROUPS.len())
+                    .filter(|&g| gin[g] >= SHOWN)
+                    .map(|g| format!("{} {:.2} -> {:.2}", GROUPS[g].0, gin[g], out[g]))
+                    .collect();
+                let added: Vec<String> = (0..GROUPS.len())
+                    .filter(|&g| gin[g] < ABSENT && out[g] >= SHOWN)
+                    .map(|g| format!("{} {:.2}", GROUPS[g].0, out[g]))
+                    .collect();
+                (
+                    or_none(shown),
+                    format!("{} of {}", v.kept, v.shown),
+                    or_none(added),
+                    if v.shown == 0 {
+                        "-".to_string()
+                    } else {
+                        format!("{:.2}", v.shown_diff)
+                    },
+                )
             }
-        }
-    }
-    rows::to_csv(&lines)
-}
-
-/// What `landmark_input` wrote (or [`landmark_files`] made) and found.
-pub struct LandmarkOutput {
-    pub kind: InputKind,
-    /// `DIR/openface.csv`.
-    pub openface: PathBuf,
-    /// Files written, or to write, under `DIR`: `openface.csv` first, `landmarks.csv`,
-    /// `blendshapes.csv` and the picture.
-    pub files: Vec<(&'static str, Vec<u8>)>,
-    pub written: Vec<PathBuf>,
-    /// Frames with a face, and without.
-    pub faces: usize,
-    pub missing: usize,
-    pub warnings: Vec<String>,
-    /// Each input frame with its landmarks drawn, cut to one window around the face.
-    pub pictures: Vec<image::RgbImage>,
-    /// MediaPipe's blendshapes per input frame (`None`: no face).
-    pub blendshapes: Vec<Option<Blendshapes>>,
-    /// The 68 landmarks' displacements from the neutral face per input frame (model frame,
-    /// IOD units, flattened x, y, z), what the landmark-space fit matches.
-    pub displacements: Vec<Option<Vec<f64>>>,
-}
-
-/// Photo/video -> landmarks -> `DIR/openface.csv` (OpenFace layout, our AUs under
-/// `calibration`), `DIR/landmarks.csv` and the input with its landmarks drawn
-/// (`landmarks.png` for a photo, `landmarks.gif` for several frames). `neutral` `None`: the
-/// model's face for one frame, the median for several. Nothing is written when reading or
-/// landmarking fails.
-pub fn landmark_input(
-    input: &Path,
-    out: &Path,
-    model: &FaceModel,
-    calibration: Calibration,
-    neutral: Option<PhotoNeutral>,
-) -> Result<LandmarkOutput> {
-    let mut made = landmark_files(input, out, model, calibration, neutral)?;
-    made.written = write_files(out, &made.files)?;
-    Ok(made)
-}
-
-/// Writes `files` into `out` (created if missing), each atomically; returns their paths.
-pub fn write_files(out: &Path, files: &[(&'static str, Vec<u8>)]) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
-    let mut written = Vec::new();
-    for (file, data) in files {
-        let path = out.join(file);
-        crate::io::atomic::write_atomic(&path, data)?;
-        written.push(path);
-    }
-    Ok(written)
-}
-
-/// What [`landmark_input`] writes, made but not written (`written` is empty), so that
-/// `transfer` writes it only when the whole transfer succeeds.
-pub fn landmark_files(
-    input: &Path,
-    out: &Path,
-    model: &FaceModel,
-    calibration: Calibration,
-    neutral: Option<PhotoNeutral>,
-) -> Result<LandmarkOutput> {
-    use crate::report::compose::{annotate, gif_bytes, png_bytes};
-    let kind = input_kind(input)?;
-    let (frames, fps) = read_frames(input, kind)?;
-    let landmarker = Landmarker::new().context("the built-in landmarker's networks")?;
-    let name = input.display().to_string();
-    let l = landmark_frames(&landmarker, model, kind, frames, fps, &name)?;
-    let faces = l.found.iter().filter(|f| f.mesh.is_some()).count();
-    if faces == 0 {
-        bail!("{name}: no face found in {} frame(s)", l.found.len());
-    }
-    let neutral = neutral.unwrap_or(if l.found.len() == 1 {
-        PhotoNeutral::Model
-    } else {
-        PhotoNeutral::Median
-    });
-    let observer = observer_for(model, &l.found, neutral, calibration)
-        .with_context(|| format!("{name}: the neutral face"))?;
-    let rows = openface_rows(&l, &observer).with_context(|| name.clone())?;
-    let displacements = l
-        .found
-        .iter()
-        .map(|f| {
-            let Some(m) = &f.metric else { return Ok(None) };
-            let d = observer.displacements(&model_landmarks(m))?;
-            Ok(Some(super::inversion::flat(&d)))
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let pictures: Vec<image::RgbImage> = l
-        .frames
-        .iter()
-        .zip(&l.found)
-        .map(|(f, found)| {
-            annotate(
-                f.width,
-                f.height,
-                &f.data,
-                found.mesh.as_ref().map(|m| m.points.as_slice()),
-            )
-        })
-        .collect();
-    let crop = face_window(&l);
-    let faces_only: Vec<image::RgbImage> = pictures
-        .iter()
-        .map(|p| image::imageops::crop_imm(p, crop[0], crop[1], crop[2], crop[3]).to_image())
-        .collect();
-    let bytes = crate::io::openface::openface_bytes(&rows)?;
-    let preview = if pictures.len() == 1 {
-        ("landmarks.png", png_bytes(&pictures[0])?)
-    } else {
-        let every = pictures.len().div_ceil(300).max(1);
-        let small: Vec<image::RgbImage> = pictures
-            .iter()
-            .step_by(every)
-            .map(|p| {
-                let w = 320.min(p.width());
-                let h = ((p.height() as f64) * w as f64 / p.width() as f64)
-                    .round()
-                    .max(1.0) as u32;
-                image::imageops::resize(p, w, h, image::imageops::FilterType::Triangle)
-            })
-            .collect();
-        let delay = if l.fps > 0.0 {
-            (1000.0 * every as f64 / l.fps).round().max(20.0) as u32
-        } else {
-            100
+            None => (
+                "no face found in the render".into(),
+                "-".into(),
+                "-".into(),
+                "-".into(),
+            ),
         };
-        ("landmarks.gif", gif_bytes(&small, delay)?)
-    };
-    let blendshapes: Vec<Option<Blendshapes>> = l.found.iter().map(|f| f.blendshapes).collect();
-    let mut files = vec![
-        ("openface.csv", bytes),
-        ("landmarks.csv", landmarks_csv(&l).into_bytes()),
-        (
-            "blendshapes.csv",
-            blendshapes_csv(&blendshapes, l.fps).into_bytes(),
-        ),
-        preview,
-    ];
-    if blendshapes.len() > 1 {
-        let file = input
-            .file_name()
-            .map_or(name.clone(), |f| f.to_string_lossy().into());
-        let figure = super::fidelity::blendshape_figure(&blendshapes, l.fps, &file)?;
-        files.push(("blendshapes.png", figure));
+        let low: Vec<String> = absent_raised(r)
+            .map(|k| format!("{} {:.1}", AU_NAMES[k], r.aus_out[k]))
+            .collect();
+        let strong: Vec<String> = strong_lost(r)
+            .map(|k| format!("{} {:.1} -> {:.1}", AU_NAMES[k], r.aus_in[k], r.aus_out[k]))
+            .collect();
+        md.push_str(&format!(
+            "| {} | {} | {} | {shown} | {kept} | {added} | {diff} | {} | {} |\n",
+            p.map_or(r.file.as_str(), |p| p.stem()),
+            p.map_or("", |p| p.shows.as_str()),
+            r.method,
+            or_none(low),
+            or_none(strong),
+        ));
     }
-    Ok(LandmarkOutput {
-        kind,
-        openface: out.join("openface.csv"),
-        files,
-        written: Vec::new(),
-        faces,
-        missing: l.found.len() - faces,
-        warnings: l.warnings,
-        pictures: faces_only,
-        blendshapes,
-        displacements,
-    })
-}
-
-/// One window around the face for every frame (so a clip does not jitter): a square about
-/// the median centre of the landmark crops, as large as the largest, clamped to the image;
-/// `[x, y, width, height]` in pixels.
-pub(crate) fn face_window(l: &Landmarked) -> [u32; 4] {
-    let rects: Vec<_> = l
-        .found
-        .iter()
-        .filter_map(|f| f.mesh.as_ref().map(|m| m.rect))
-        .collect();
-    let mut xs: Vec<f64> = rects.iter().map(|r| r.center[0]).collect();
-    let mut ys: Vec<f64> = rects.iter().map(|r| r.center[1]).collect();
-    let (cx, cy) = (crate::stats::median(&mut xs), crate::stats::median(&mut ys));
-    let side = rects.iter().map(|r| r.width).fold(0.0, f64::max) * 1.1;
-    let (w, h) = (l.width as f64, l.height as f64);
-    let side = side.min(w).min(h).max(2.0);
-    let x0 = (cx - side / 2.0).clamp(0.0, w - side);
-    let y0 = (cy - side / 2.0).clamp(0.0, h - side);
-    [x0 as u32, y0 as u32, side as u32, side as u32]
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn kinds_come_from_content_not_the_extension() {
-        let dir = std::env::temp_dir().join(format!("facelab-kind-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let png = dir.join("photo.csv");
-        image::RgbImage::new(4, 4)
-            .save_with_format(&png, image::ImageFormat::Png)
-            .unwrap();
-        assert_eq!(input_kind(&png).unwrap(), InputKind::Image);
-        let csv = dir.join("clip.png");
-        std::fs::write(&csv, "frame, face_id, timestamp, AU01_r\n1, 0, 0.0, 0.5\n").unwrap();
-        assert_eq!(input_kind(&csv).unwrap(), InputKind::OpenFace);
-        assert_eq!(input_kind(&dir).unwrap(), InputKind::Folder);
-        let empty = dir.join("empty.jpg");
-        std::fs::write(&empty, "").unwrap();
-        assert!(input_kind(&empty)
-            .unwrap_err()
-            .to_string()
-            .contains("0 bytes"));
-        std::fs::remove_dir_all(&dir).unwrap();
+    md.push('\n');
+    for method in METHODS {
+        let mine: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.reading == Reading::Render && r.method == method)
+            .collect();
+        let (mut shown, mut kept, mut added) = (0, 0, 0);
+        let (mut low, mut strong, mut strong_kept) = (0, 0, 0);
+        for r in &mine {
+            if let Some(out) = &r.groups_out {
+                let v = verdict(&group_agreement(&[Some(r.groups_in)], &[Some(*out)]));
+                (shown, kept, added) = (shown + v.shown, kept + v.kept, added + v.added);
+            }
+            low += absent_raised(r).count();
+            let all = (0..AU_COUNT).filter(|&k| r.aus_in[k] >= STRONG).count();
+            strong += all;
+            strong_kept += all - strong_lost(r).count();
+        }
+        md.push_str(&format!(
+            "- `{method}`, over the {} pictures: of the {shown} blendshape groups the pictures \
+             show, {kept} kept within 0.1; {added} groups shown that the pictures do not. \
+             facelab's AUs: {low} at or below 0.5 in come out above 1.0; {strong_kept} of the \
+             {strong} at or above 2 in come out at 70% or more.\n",
+            mine.len()
+        ));
     }
+    md
 }

@@ -13,17 +13,17 @@ use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 
 use super::table2::RefFrame;
-use super::transfer::follow;
 use crate::cache::{Entry, Lookup};
 use crate::cohort::{CohortKind, CohortParams};
 use crate::experiments::headpose::{self, VoluntaryWeights};
-use crate::experiments::table2_stage::{planned_cohort, Table2Result};
+use crate::experiments::table2::{planned_cohort, Table2Result};
 use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Mlp;
 use crate::report::table::{Table, TableRow};
 use crate::run::cell::{CellRun, Experiment, Plan};
 use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::neck::{HeadPose, Neck, PoseSequence};
+use crate::transfer::follow;
 
 /// Bump when the evaluation changes meaning.
 const POSE_TRANSFER_VERSION: u32 = 1;

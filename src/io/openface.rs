@@ -473,3 +473,31 @@ pub fn full_header() -> Vec<String> {
     h.push("AU28_c".into());
     h
 }
+
+/// An OpenFace file our observer can read: with 3D landmarks and at least one used row.
+pub fn read_observable(input: &Path) -> anyhow::Result<OpenFaceFile> {
+    let file = read_openface(input)?;
+    if !file.layout.landmarks_3d {
+        anyhow::bail!(
+            "{}: no 3D landmarks (X_0..Z_67): our observer measures AUs from 3D landmarks; \
+             rerun OpenFace with -3Dfp (or without -no3Dfp)",
+            input.display()
+        );
+    }
+    if file.rows.is_empty() {
+        anyhow::bail!(
+            "{}: no row with success = 1 ({} skipped)",
+            input.display(),
+            file.skipped
+        );
+    }
+    Ok(file)
+}
+
+/// The used rows' 3D landmarks in our frame (the file's layout has them).
+pub fn camera_faces(file: &OpenFaceFile) -> Vec<[V3; LANDMARK_COUNT]> {
+    file.rows
+        .iter()
+        .map(|r| crate::observe::from_camera(r.landmarks_3d.as_ref().expect("3D layout checked")))
+        .collect()
+}

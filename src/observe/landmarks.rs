@@ -5,7 +5,9 @@
 
 use std::sync::OnceLock;
 
+use super::au::{Calibration, ObserveError, Observer};
 use crate::sim::geom::V3;
+use crate::sim::FaceModel;
 
 pub const LANDMARK_COUNT: usize = 68;
 
@@ -43,5 +45,29 @@ pub fn landmarks(surface: &[V3]) -> [V3; LANDMARK_COUNT] {
             }
         }
         p.map(|c| c / vs.len() as f64)
+    })
+}
+
+/// The observer of the base model: its rest landmarks are the neutral face.
+pub fn model_observer(
+    model: &FaceModel,
+    calibration: Calibration,
+) -> Result<Observer, ObserveError> {
+    let rest = model.rest_state();
+    Observer::new(&landmarks(rest.surface(model.vertex_count())), calibration)
+}
+
+/// OpenFace's camera frame (+y down, +z away from the camera) to ours (+y up, +z toward it).
+pub fn from_camera(p: &[V3; LANDMARK_COUNT]) -> [V3; LANDMARK_COUNT] {
+    p.map(|q| [q[0], -q[1], -q[2]])
+}
+
+/// The per-landmark, per-coordinate median of `faces`.
+pub fn median_face(faces: &[[V3; LANDMARK_COUNT]]) -> [V3; LANDMARK_COUNT] {
+    std::array::from_fn(|i| {
+        std::array::from_fn(|k| {
+            let mut v: Vec<f64> = faces.iter().map(|f| f[i][k]).collect();
+            crate::stats::median(&mut v)
+        })
     })
 }

@@ -8,5 +8,5 @@ pub mod landmarks;
 pub mod pose;
 
 pub use au::{Calibration, Observation, Observer, ObserverNoise, AU_COUNT, AU_NAMES};
-pub use landmarks::{landmarks, LANDMARK_COUNT};
+pub use landmarks::{from_camera, landmarks, median_face, model_observer, LANDMARK_COUNT};
 pub use pose::HeadPose;

@@ -4,9 +4,9 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
-use facelab::experiments::face::{parse_assignments, PoseRequest};
 use facelab::io::face::FaceSource;
 use facelab::sim::SolveParams;
+use facelab::tools::face::{parse_assignments, PoseRequest};
 
 #[derive(Parser)]
 #[command(

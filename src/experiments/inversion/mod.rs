@@ -28,8 +28,8 @@ use rayon::prelude::*;
 
 use crate::cache::Entry;
 use crate::cohort::{CohortKind, CohortParams, Subject};
-use crate::experiments::table2::{predict_activations, range_map, training_range, RefFrame};
-use crate::experiments::table2_stage::{planned_cohort, Table2Result};
+use crate::experiments::table2::RefFrame;
+use crate::experiments::table2::{planned_cohort, Table2Result};
 use crate::invert::{au_fit, Bound, InversionParams};
 use crate::learn::{Mlp, Normalization};
 use crate::observe::au::AU_MAX;
@@ -39,19 +39,17 @@ use crate::run::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::expression::ExpressionWeights;
 use crate::sim::{solve_from_rest, Activations, FaceParams, Mesh, SolveParams, Workspace};
+use crate::transfer::network::{predict_activations, range_map, training_range};
 
-use crate::experiments::observe::model_observer;
+use crate::observe::model_observer;
 
-/// The methods, in table order.
-mod inverter;
 mod report;
 
-pub(crate) use inverter::flat;
-use inverter::{activations, rms};
-pub use inverter::{Inverter, Refined, AU_PRIOR};
+use crate::transfer::inverter::{activations, flat, rms, Inverter};
 
 pub use report::{csv, markdown, timing_csv, timing_markdown};
 
+/// The methods, in table order.
 pub const METHODS: [&str; 6] = [
     "network",
     "network_normalized",

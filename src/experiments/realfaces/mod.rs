@@ -16,10 +16,10 @@
 
 use anyhow::{bail, Context, Result};
 
-use super::table2::{range_map, training_range, transfer, Setting};
 use crate::cache::{self, Entry};
 use crate::dataset::reader::FaceReader;
-use crate::experiments::inversion::AU_PRIOR;
+use crate::transfer::inverter::AU_PRIOR;
+use crate::transfer::network::{au_mse, range_map, training_range, transfer, Setting};
 
 mod report;
 use crate::io::openface::read_openface;
@@ -300,9 +300,8 @@ fn through_fit(cx: &mut CellRun, files: &[RealInput]) -> Result<Vec<FileRow>> {
             let (reference, skipped) = frames_of(f, spec.realfaces.frame_stride)?;
             let targets: Vec<Option<[f64; AU_COUNT]>> =
                 reference.iter().copied().map(Some).collect();
-            let fits =
-                crate::experiments::transfer::au_space_fit(spec, &model, &calibration, &targets)
-                    .with_context(|| format!("{}: the AU fit", f.file))?;
+            let fits = crate::transfer::au_space_fit(spec, &model, &calibration, &targets)
+                .with_context(|| format!("{}: the AU fit", f.file))?;
             let mut ws = crate::sim::Workspace::new(&model)?;
             let mut got = Vec::with_capacity(fits.len());
             for (i, fit) in fits.into_iter().enumerate() {
@@ -458,7 +457,7 @@ fn file_row(
         route,
         frames: reference.len(),
         skipped,
-        mse: super::table2::au_mse(reference, got),
+        mse: au_mse(reference, got),
         smile: mean_abs(
             reference
                 .iter()

@@ -2,10 +2,10 @@
 //! errors, and a sweep's per-cell comparison.
 
 use super::{FileRow, Route, SMILE_AU12};
-use crate::experiments::inversion::AU_PRIOR;
 use crate::observe::{AU_COUNT, AU_NAMES};
 use crate::report::table::{Table, TableRow};
 use crate::spec::Spec;
+use crate::transfer::inverter::AU_PRIOR;
 
 fn f4(v: f64) -> String {
     if v.is_nan() {

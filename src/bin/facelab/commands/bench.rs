@@ -1,10 +1,10 @@
 //! `facelab bench ...`: the benchmarks (run with --release), each printing its numbers and how
 //! they were measured.
 
-use facelab::experiments::bench::{
+use facelab::sim::SolveParams;
+use facelab::tools::bench::{
     bench_landmark, bench_neck, bench_observe, bench_solve, bench_train, bench_transfer,
 };
-use facelab::sim::SolveParams;
 
 use super::set_threads;
 use crate::cli::Bench;

@@ -1,6 +1,6 @@
 //! `facelab edit`: activation curves edited by keyframes (Choe et al.'s displacement map).
 
-use facelab::experiments::editing::edit_file;
+use facelab::tools::edit::edit_file;
 
 use crate::cli::EditArgs;
 

@@ -1,10 +1,10 @@
 //! `facelab face reach | judge | sweep`: the face's range of motion, what MediaPipe reads on
 //! it, and its validity over every muscle, pair and expression.
 
-use facelab::experiments::face::face_judge;
-use facelab::experiments::reach::{write_reach, write_sweep};
 use facelab::io::reach::default_reach_path;
 use facelab::judge::{groups, GROUP_LABELS};
+use facelab::tools::face::face_judge;
+use facelab::tools::reach::{write_reach, write_sweep};
 
 use crate::cli::FaceCommand;
 

@@ -1,6 +1,6 @@
 //! `facelab gallery`: the rest face, each expression and each muscle alone, rendered.
 
-use facelab::experiments::face::gallery;
+use facelab::tools::face::gallery;
 
 use crate::cli::GalleryArgs;
 

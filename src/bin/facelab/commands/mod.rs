@@ -19,7 +19,7 @@ pub mod verify;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use facelab::experiments::photos::{LandmarkOutput, PhotoNeutral};
+use facelab::transfer::pictures::{LandmarkOutput, PhotoNeutral};
 
 /// Sets the worker count for rayon and for candle (which reads `RAYON_NUM_THREADS` on every
 /// matrix product when it is unset, at a cost). Returns the count used.

@@ -3,11 +3,11 @@
 
 use std::path::PathBuf;
 
-use facelab::experiments::observe;
-use facelab::experiments::photos::landmark_input;
 use facelab::io::atomic::write_atomic;
 use facelab::io::calibration::default_calibration_path;
 use facelab::io::observer_fit::{read_any_calibration, readout_csv, DEFAULT_READOUT};
+use facelab::tools::observe;
+use facelab::transfer::pictures::landmark_input;
 
 use super::{photo_neutral, print_landmarked};
 use crate::cli::ObserveArgs;
@@ -75,7 +75,7 @@ pub fn run(args: ObserveArgs) -> anyhow::Result<()> {
         let source = args.face.source();
         let model = source.model()?;
         let a = request.activations(&source.weights()?)?;
-        let observer = observe::model_observer(&model, read_any_calibration(&path)?)?;
+        let observer = facelab::observe::model_observer(&model, read_any_calibration(&path)?)?;
         let o = observe::observe_activations(&model, &observer, &a)?;
         observe::print_observation(&o, stdout)?;
     }

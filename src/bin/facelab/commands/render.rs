@@ -1,7 +1,7 @@
 //! `facelab render`: one face, posed and rendered.
 
-use facelab::experiments::face::render_to;
 use facelab::report::render::{Camera, RenderOptions};
+use facelab::tools::face::render_to;
 
 use crate::cli::{RenderArgs, View};
 

@@ -1,6 +1,6 @@
 //! `facelab retarget`: one activation sequence on the base face and on cohort subjects.
 
-use facelab::experiments::editing::retarget;
+use facelab::tools::edit::retarget;
 
 use crate::cli::RetargetArgs;
 

@@ -1,10 +1,10 @@
 //! `facelab transfer`: a picture, a clip or an OpenFace file onto the face, with the judge's
 //! verdict.
 
-use facelab::experiments::table2::FLAT_SPREAD;
-use facelab::experiments::transfer::{transfer_path, TransferMethod, TransferOptions};
 use facelab::learn::Normalization;
 use facelab::observe::AU_NAMES;
+use facelab::transfer::network::FLAT_SPREAD;
+use facelab::transfer::{transfer_path, TransferMethod, TransferOptions};
 
 use super::{data_arg, photo_neutral, print_landmarked};
 use crate::cli::TransferArgs;

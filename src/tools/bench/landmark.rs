@@ -15,10 +15,10 @@ use super::*;
 /// clip at 24 fps of that frame, from frames in memory to AU rows with tracking, as
 /// `observe` runs it.
 pub fn bench_landmark(frames: usize, seconds: f64, out: &mut impl Write) -> Result<()> {
-    use crate::experiments::observe::model_observer;
-    use crate::experiments::photos::{landmark_frames, openface_rows, InputKind};
     use crate::io::calibration::{default_calibration_path, read_calibration};
     use crate::landmark::{metric, Landmarker, MeshNetwork, MeshVersion, RgbFrame};
+    use crate::observe::model_observer;
+    use crate::transfer::pictures::{landmark_frames, openface_rows, InputKind};
 
     let path = crate::io::data_path("tests/data/landmarker/photos/astronaut.png");
     let photo = image::open(&path)

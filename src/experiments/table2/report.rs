@@ -2,12 +2,13 @@
 
 use crate::cohort::CohortKind;
 use crate::experiments::realfaces::FileRow;
-use crate::experiments::table2::{self, RefFrame, Row, Setting, Transferred};
+use crate::experiments::table2::{self, RefFrame, Row};
 use crate::io::rows::{self, num, CsvRow};
 use crate::observe::{AU_COUNT, AU_NAMES};
 use crate::report::table::{Table, TableRow};
 use crate::spec::Spec;
 use crate::stats;
+use crate::transfer::network::{Setting, Transferred};
 use anyhow::Result;
 
 pub(super) fn row_name(kind: CohortKind, setting: Setting) -> String {

@@ -8,10 +8,10 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use super::run_spec;
-use crate::experiments::inversion::{Inverter, Refined, AU_PRIOR};
 use crate::sim::basis::LinearBasis;
 use crate::sim::solver::solve_predicted;
 use crate::sim::{solve, Activations, SolveParams, Workspace};
+use crate::transfer::inverter::{Inverter, Refined, AU_PRIOR};
 
 /// A frame's activations found without the network, and their face, solved at the run's
 /// tolerance. Each such frame is a function of its own input, so the frames are solved in
@@ -27,7 +27,8 @@ pub struct Fitted {
 /// The landmark-space fit of every used row of an OpenFace file with 3D landmarks, against
 /// the file's own neutral face (the per-landmark median of its rows), indexed by `frame - 1`.
 pub(super) fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Fitted>>> {
-    use crate::experiments::observe::{camera_faces, median_face, read_observable};
+    use crate::io::openface::{camera_faces, read_observable};
+    use crate::observe::median_face;
     let file = read_observable(input).context("--method landmarks fits the file's 3D landmarks")?;
     let spec = run_spec(run)?;
     let model = spec.face_source().model()?;
@@ -44,7 +45,7 @@ pub(super) fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Fitted
         let d = observer
             .displacements(face)
             .with_context(|| format!("{}:{}", input.display(), r.line))?;
-        displacements[r.frame as usize - 1] = Some(crate::experiments::inversion::flat(&d));
+        displacements[r.frame as usize - 1] = Some(crate::transfer::inverter::flat(&d));
     }
     landmark_fit(&spec, &model, &calibration, &displacements)
 }

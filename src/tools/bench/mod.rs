@@ -57,9 +57,9 @@ fn landmark_error(a: &[V3], b: &[V3]) -> (f64, f64) {
 /// `facelab bench observe`: observing one face (landmarks + 17 AUs), and reading a full
 /// 714-column OpenFace file of `frames` rows written to a temporary folder.
 pub fn bench_observe(frames: usize, out: &mut impl Write) -> Result<()> {
-    use crate::experiments::observe::model_observer;
     use crate::io::calibration::{default_calibration_path, read_calibration};
     use crate::io::openface::{full_header, read_openface};
+    use crate::observe::model_observer;
 
     let source = FaceSource::default();
     let model = source.model()?;
@@ -202,11 +202,10 @@ pub fn bench_train(
 /// from rest), taking reference AUs and the network from a run folder with Table 2.
 pub fn bench_transfer(run: &std::path::Path, clips: usize, out: &mut impl Write) -> Result<()> {
     use crate::cohort::CohortKind;
-    use crate::experiments::observe::model_observer;
-    use crate::experiments::table2::{
-        clip_ranges, predict_activations, reference_from_csv, solve_clip,
-    };
+    use crate::experiments::table2::{clip_ranges, reference_from_csv};
     use crate::io::calibration::{default_calibration_path, read_calibration};
+    use crate::observe::model_observer;
+    use crate::transfer::network::{predict_activations, solve_clip};
     use anyhow::Context;
 
     let path = run.join("reference.csv");

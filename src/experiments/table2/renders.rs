@@ -1,13 +1,14 @@
 //! Table 2's renders: the transfer grid and the video GIFs, cached by their inputs.
 
 use crate::cohort::{CohortKind, Subject};
-use crate::experiments::table2::{to_activations, RefFrame, Setting, Transferred};
+use crate::experiments::table2::RefFrame;
 use crate::report::compose::{gif_bytes, labelled_grid, png_bytes};
 use crate::report::render::{render, RenderOptions};
 use crate::sim::basis::LinearBasis;
 use crate::sim::expression::Expression;
 use crate::sim::solver::solve_predicted;
 use crate::sim::{solve, solve_from_rest, Activations, FaceModel, SolveParams, State, Workspace};
+use crate::transfer::network::{to_activations, Setting, Transferred};
 use anyhow::{Context, Result};
 use image::RgbImage;
 

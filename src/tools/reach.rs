@@ -14,7 +14,6 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::observe::model_observer;
 use crate::io::atomic::write_atomic;
 use crate::io::calibration::default_calibration_path;
 use crate::io::expressions::controls_activations;
@@ -24,6 +23,7 @@ use crate::io::reach::{read_reach, Measure, ReachLine, ReachRow};
 use crate::io::rows::{self, CsvRow};
 use crate::observe::au::{Observer, AU_COUNT, AU_NAMES};
 use crate::observe::landmarks;
+use crate::observe::model_observer;
 use crate::report::figures::heat_map;
 use crate::sim::controls::{JAW_ROTATION, JAW_SLIDE, JAW_TWIST};
 use crate::sim::expression::Expression;

@@ -5,8 +5,8 @@
 
 use anyhow::Result;
 
-use crate::experiments::observe::model_observer;
 use crate::invert::{accelerated, au_fit, projected_newton, Bound, BoxQp, Solution};
+use crate::observe::model_observer;
 use crate::observe::{landmarks, Calibration, Observer, AU_COUNT, LANDMARK_COUNT};
 use crate::sim::basis::LinearBasis;
 use crate::sim::controls::{CONTROL_COUNT, JAW_ROTATION, JAW_SLIDE, JAW_TWIST, MUSCLE_COUNT};
@@ -14,11 +14,11 @@ use crate::sim::solver::solve_predicted;
 use crate::sim::{Activations, FaceModel, SolveParams, Workspace};
 
 /// The optimization variables: the 52 muscles and the jaw rotation.
-pub(super) fn variables() -> Vec<usize> {
+pub(crate) fn variables() -> Vec<usize> {
     (0..MUSCLE_COUNT).chain([JAW_ROTATION]).collect()
 }
 
-pub(super) fn activations(x: &[f64]) -> Activations {
+pub(crate) fn activations(x: &[f64]) -> Activations {
     let mut v = [0.0; CONTROL_COUNT];
     for (&c, &value) in variables().iter().zip(x) {
         v[c] = value.clamp(0.0, 1.0);
@@ -324,7 +324,7 @@ pub struct Refined {
 
 /// The RMS over landmarks of the distance between two landmark sets given as flattened
 /// `x, y, z` coordinates: the root of the summed squared coordinate differences per landmark.
-pub(super) fn rms(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn rms(a: &[f64], b: &[f64]) -> f64 {
     debug_assert_eq!(a.len(), 3 * LANDMARK_COUNT);
     (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / LANDMARK_COUNT as f64).sqrt()
 }

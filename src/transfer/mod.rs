@@ -11,9 +11,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use image::RgbImage;
 
+pub mod fidelity;
 mod fit;
+pub mod inverter;
 mod method;
 mod neck;
+pub mod network;
+pub mod pictures;
 
 pub(crate) use fit::au_space_fit;
 pub use fit::Fitted;
@@ -23,21 +27,20 @@ pub use method::TransferMethod;
 pub(crate) use neck::follow;
 use neck::{drive_neck, neck_weights, no_neck_controller};
 
-use super::fidelity::{Fidelity, JudgeFrames};
-use super::observe::model_observer;
-use super::table2::{au_mse, predict_activations};
 use crate::headneck::{face_motion, posed_face};
 use crate::io::atomic::write_atomic;
 use crate::io::openface::{parse_openface, read_openface, write_openface, FaceRow};
 use crate::io::rows::{self, num, CsvRow};
 use crate::landmark::Blendshapes;
 use crate::learn::{Mlp, Normalization, Normalizer};
-use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
+use crate::observe::{landmarks, model_observer, AU_COUNT, AU_NAMES};
 use crate::report::compose::{gif_bytes, side_by_side};
 use crate::report::render::{render, Camera, RenderOptions};
 use crate::report::save_png;
 use crate::sim::controls::control_names;
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
+use fidelity::{Fidelity, JudgeFrames};
+use network::{au_mse, predict_activations};
 
 #[derive(Clone, Debug)]
 pub struct TransferOptions {
@@ -193,12 +196,12 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         );
     }
     let reference: Vec<[f64; AU_COUNT]> = file.rows.iter().map(|r| r.aus).collect();
-    let flat = super::table2::flat_aus(opts.normalize, &reference);
+    let flat = network::flat_aus(opts.normalize, &reference);
     let map = match opts.normalize {
         Normalization::None => None,
         kind => {
             let target = training_normalizer(&run.join("training_aus.csv"), kind)?;
-            Some(super::table2::range_map(kind, &reference, &target))
+            Some(network::range_map(kind, &reference, &target))
         }
     };
     let (acts, mut presolved) = match &opts.fitted {
@@ -505,7 +508,7 @@ pub fn solve_clip_tolerant<S: Clone>(
 
 /// `facelab transfer PATH`: an OpenFace CSV goes straight to [`transfer_openface`]
 /// (normalization `normalize`, default min-max); a photo, folder, GIF or video first goes
-/// through the built-in landmarker ([`super::photos::landmark_input`]), which writes
+/// through the built-in landmarker ([`pictures::landmark_input`]), which writes
 /// `openface.csv` into the output folder with AUs read by the run's own observer (its spec's
 /// calibration), so they are on the training data's scale and need no normalization (default
 /// `none`). Returns the landmarker's summary for image inputs.
@@ -513,10 +516,10 @@ pub fn transfer_path(
     input: &Path,
     opts: &TransferOptions,
     normalize: Option<Normalization>,
-    neutral: Option<super::photos::PhotoNeutral>,
+    neutral: Option<pictures::PhotoNeutral>,
     method: Option<TransferMethod>,
-) -> Result<(TransferSummary, Option<super::photos::LandmarkOutput>)> {
-    use super::photos::{input_kind, landmark_files, write_files, InputKind};
+) -> Result<(TransferSummary, Option<pictures::LandmarkOutput>)> {
+    use pictures::{input_kind, landmark_files, write_files, InputKind};
     let fits = method.is_none_or(|m| m != TransferMethod::Network);
     if fits && normalize.is_some_and(|n| n != Normalization::None) {
         bail!(

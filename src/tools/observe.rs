@@ -10,23 +10,14 @@ use super::face::pose;
 use crate::io::calibration::{read_calibration, CalibrationTable};
 use crate::io::face::FaceSource;
 use crate::io::observer_fit::{read_readout_inputs, read_realdata};
-use crate::io::openface::{read_openface, write_openface, FaceRow, OpenFaceFile};
+use crate::io::openface::{camera_faces, read_observable, write_openface, FaceRow, OpenFaceFile};
 use crate::observe::au::{Calibration, FittedReadout, Observation, Observer};
 use crate::observe::features::inputs;
 use crate::observe::fit::{fit_readout, leave_one_person_out, PersonFrames};
-use crate::observe::{landmarks, AU_COUNT, AU_NAMES, LANDMARK_COUNT};
+use crate::observe::{landmarks, median_face, model_observer, AU_COUNT, AU_NAMES, LANDMARK_COUNT};
 use crate::sim::geom::V3;
 use crate::sim::{Activations, FaceModel, State, Workspace};
 use crate::stats::{mean_abs_diff, pearson};
-
-/// The observer of the base model: its rest landmarks are the neutral face.
-pub fn model_observer(model: &FaceModel, calibration: Calibration) -> Result<Observer> {
-    let rest = model.rest_state();
-    Ok(Observer::new(
-        &landmarks(rest.surface(model.vertex_count())),
-        calibration,
-    )?)
-}
 
 /// Observes a solved state of `model`.
 pub fn observe_state(model: &FaceModel, observer: &Observer, state: &State) -> Result<Observation> {
@@ -88,11 +79,6 @@ pub fn print_observation(o: &Observation, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
-/// OpenFace's camera frame (+y down, +z away from the camera) to ours (+y up, +z toward it).
-pub fn from_camera(p: &[V3; LANDMARK_COUNT]) -> [V3; LANDMARK_COUNT] {
-    p.map(|q| [q[0], -q[1], -q[2]])
-}
-
 /// Which neutral face `observe --openface` measures against.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Neutral {
@@ -110,44 +96,6 @@ pub struct Agreement {
     /// Pearson r per AU (NaN where either side is constant).
     pub pearson: [f64; AU_COUNT],
     pub mean_abs_diff: [f64; AU_COUNT],
-}
-
-/// The per-landmark, per-coordinate median of `faces`.
-pub(crate) fn median_face(faces: &[[V3; LANDMARK_COUNT]]) -> [V3; LANDMARK_COUNT] {
-    std::array::from_fn(|i| {
-        std::array::from_fn(|k| {
-            let mut v: Vec<f64> = faces.iter().map(|f| f[i][k]).collect();
-            crate::stats::median(&mut v)
-        })
-    })
-}
-
-/// An OpenFace file our observer can read: with 3D landmarks and at least one used row.
-pub(crate) fn read_observable(input: &Path) -> Result<OpenFaceFile> {
-    let file = read_openface(input)?;
-    if !file.layout.landmarks_3d {
-        bail!(
-            "{}: no 3D landmarks (X_0..Z_67): our observer measures AUs from 3D landmarks; \
-             rerun OpenFace with -3Dfp (or without -no3Dfp)",
-            input.display()
-        );
-    }
-    if file.rows.is_empty() {
-        bail!(
-            "{}: no row with success = 1 ({} skipped)",
-            input.display(),
-            file.skipped
-        );
-    }
-    Ok(file)
-}
-
-/// The used rows' 3D landmarks in our frame (the file's layout has them).
-pub(crate) fn camera_faces(file: &OpenFaceFile) -> Vec<[V3; LANDMARK_COUNT]> {
-    file.rows
-        .iter()
-        .map(|r| from_camera(r.landmarks_3d.as_ref().expect("3D layout checked")))
-        .collect()
 }
 
 /// The neutral face of a file's `faces`.

@@ -14,11 +14,6 @@ use crate::cohort::CohortKind;
 use crate::dataset::reader::FaceReader;
 use crate::dataset::Sample;
 use crate::experiments::realfaces;
-use crate::experiments::table2::{
-    self, clip_count, clip_ranges, range_map, reference, reference_csv, reference_from_csv,
-    training_range, transfer, transfers_csv, transfers_from_csv, RefFrame, Row, Setting,
-    Transferred,
-};
 use crate::io::face::FaceSource;
 use crate::learn::Mlp;
 use crate::observe::{Calibration, AU_COUNT};
@@ -27,9 +22,13 @@ use crate::run::stage::{text, Artifact, Files, Stages, Unit};
 use crate::sim::basis::LinearBasis;
 use crate::sim::{FaceModel, SolveParams};
 use crate::spec::Spec;
+use crate::transfer::network::{au_mse, range_map, training_range, transfer, Setting, Transferred};
 
+mod cohort;
 mod renders;
 mod report;
+
+pub use cohort::*;
 
 use renders::*;
 pub use report::{bars, csv, frames_csv, markdown, sweep_figure, sweep_markdown, tex};
@@ -402,7 +401,7 @@ pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
                     seed: *seed,
                     cohort: kind,
                     setting: *setting,
-                    mse: table2::au_mse(&r, &t),
+                    mse: au_mse(&r, &t),
                 });
             }
         }

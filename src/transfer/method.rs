@@ -29,7 +29,7 @@ impl TransferMethod {
     /// The method `facelab transfer` uses for `input` when none is asked for: the AU fit for
     /// an OpenFace file, the landmark fit for pictures.
     pub fn for_input(input: &Path, asked: Option<TransferMethod>) -> Result<TransferMethod> {
-        use crate::experiments::photos::{input_kind, InputKind};
+        use crate::transfer::pictures::{input_kind, InputKind};
         Ok(match asked {
             Some(m) => m,
             None if input_kind(input)? == InputKind::OpenFace => TransferMethod::Aus,

@@ -253,7 +253,7 @@ pub fn bench_solve(
                 let chain: Vec<Activations> = order.iter().map(|&i| draws[i].clone()).collect();
                 let mut solved: Vec<Option<crate::sim::State>> = vec![None; per];
                 let t = Instant::now();
-                crate::experiments::table2::solve_clip(
+                crate::transfer::network::solve_clip(
                     &model,
                     &chain,
                     |a, ws| {
