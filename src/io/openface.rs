@@ -377,6 +377,86 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
     })
 }
 
+impl OpenFaceFile {
+    /// Frames made in memory (the landmarker's rows) as a reader of their written file
+    /// (`write_openface`) sees them, without writing it: every value at OpenFace's decimals,
+    /// the pose and landmark blocks only where every row has them, rows with `success = 0`
+    /// counted in `skipped`, lines numbered as in the file. So a picture's transfer works from
+    /// exactly the values its `openface.csv` records.
+    pub fn from_rows(path: &Path, rows: &[FaceRow]) -> OpenFaceFile {
+        let all = |has: fn(&FaceRow) -> bool| !rows.is_empty() && rows.iter().all(has);
+        let pose = all(|r| r.pose.is_some());
+        let landmarks_2d = all(|r| r.landmarks_2d.is_some());
+        let landmarks_3d = all(|r| r.landmarks_3d.is_some());
+        // A value as the writer's decimals leave it.
+        let at = |v: f64, decimals: usize| -> f64 {
+            format!("{v:.decimals$}")
+                .parse()
+                .expect("a formatted number reads back")
+        };
+        let mut columns: Vec<String> = ["frame", "face_id", "timestamp", "confidence", "success"]
+            .map(String::from)
+            .to_vec();
+        if pose {
+            columns.extend(pose_columns().map(String::from));
+        }
+        for (present, axes) in [
+            (landmarks_2d, &["x", "y"][..]),
+            (landmarks_3d, &["X", "Y", "Z"]),
+        ] {
+            if present {
+                for a in axes {
+                    columns.extend((0..LANDMARK_COUNT).map(|i| format!("{a}_{i}")));
+                }
+            }
+        }
+        columns.extend((0..AU_COUNT).map(au_column));
+        let used: Vec<FaceRow> = rows
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.success)
+            .map(|(i, r)| FaceRow {
+                line: i + 2,
+                frame: r.frame,
+                face_id: Some(r.face_id.unwrap_or(0)),
+                timestamp: Some(at(r.timestamp.unwrap_or(0.0), 3)),
+                confidence: at(r.confidence, 2),
+                success: true,
+                aus: r.aus.map(|v| at(v, 2)),
+                pose: r
+                    .pose
+                    .filter(|_| pose)
+                    .map(|p| std::array::from_fn(|k| at(p[k], if k < 3 { 1 } else { 3 }))),
+                landmarks_2d: r
+                    .landmarks_2d
+                    .as_ref()
+                    .filter(|_| landmarks_2d)
+                    .map(|l| Box::new(l.map(|p| p.map(|v| at(v, 1))))),
+                landmarks_3d: r
+                    .landmarks_3d
+                    .as_ref()
+                    .filter(|_| landmarks_3d)
+                    .map(|l| Box::new(l.map(|p| p.map(|v| at(v, 1))))),
+            })
+            .collect();
+        OpenFaceFile {
+            path: path.to_path_buf(),
+            layout: Layout {
+                separator: Separator::Comma,
+                image_mode: false,
+                face_id: true,
+                timestamp: true,
+                pose,
+                landmarks_2d,
+                landmarks_3d,
+                columns,
+            },
+            skipped: rows.len() - used.len(),
+            rows: used,
+        }
+    }
+}
+
 /// Writes rows as OpenFace 2.2's FeatureExtraction does (`,` separator): `frame, face_id,
 /// timestamp, confidence, success`, the pose block if every row has one, the 2D and then the
 /// 3D landmarks if every row has them, then the 17 `AUxx_r` columns, with OpenFace's decimals (AUs 2, pose
@@ -477,6 +557,13 @@ pub fn full_header() -> Vec<String> {
 /// An OpenFace file our observer can read: with 3D landmarks and at least one used row.
 pub fn read_observable(input: &Path) -> anyhow::Result<OpenFaceFile> {
     let file = read_openface(input)?;
+    observable(&file)?;
+    Ok(file)
+}
+
+/// Whether our observer can read `file`: 3D landmarks and at least one used row.
+pub fn observable(file: &OpenFaceFile) -> anyhow::Result<()> {
+    let input = &file.path;
     if !file.layout.landmarks_3d {
         anyhow::bail!(
             "{}: no 3D landmarks (X_0..Z_67): our observer measures AUs from 3D landmarks; \
@@ -491,7 +578,7 @@ pub fn read_observable(input: &Path) -> anyhow::Result<OpenFaceFile> {
             file.skipped
         );
     }
-    Ok(file)
+    Ok(())
 }
 
 /// The used rows' 3D landmarks in our frame (the file's layout has them).

@@ -8,6 +8,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use super::run_spec;
+use crate::io::openface::OpenFaceFile;
 use crate::sim::basis::LinearBasis;
 use crate::sim::solver::solve_predicted;
 use crate::sim::{solve, Activations, SolveParams, Workspace};
@@ -26,14 +27,15 @@ pub struct Fitted {
 
 /// The landmark-space fit of every used row of an OpenFace file with 3D landmarks, against
 /// the file's own neutral face (the per-landmark median of its rows), indexed by `frame - 1`.
-pub(super) fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Fitted>>> {
-    use crate::io::openface::{camera_faces, read_observable};
+pub(super) fn openface_fit(file: &OpenFaceFile, run: &Path) -> Result<Vec<Option<Fitted>>> {
+    use crate::io::openface::{camera_faces, observable};
     use crate::observe::median_face;
-    let file = read_observable(input).context("--method landmarks fits the file's 3D landmarks")?;
+    let input = &file.path;
+    observable(file).context("--method landmarks fits the file's 3D landmarks")?;
     let spec = run_spec(run)?;
     let model = spec.face_source().model()?;
     let calibration = crate::run::cell::spec_calibration(&spec)?;
-    let faces = camera_faces(&file);
+    let faces = camera_faces(file);
     let observer = crate::observe::Observer::new(&median_face(&faces), calibration.clone())
         .with_context(|| format!("{}: the neutral face", input.display()))?;
     let frames = file.rows.iter().map(|r| r.frame).max().unwrap_or(0).max(0) as usize;
@@ -52,9 +54,7 @@ pub(super) fn openface_fit(input: &Path, run: &Path) -> Result<Vec<Option<Fitted
 
 /// Each used row's AUs, indexed by `frame - 1` (`None`: no used row), what
 /// [`au_space_fit`] matches.
-pub(super) fn aus_by_frame(
-    file: &crate::io::openface::OpenFaceFile,
-) -> Vec<Option<[f64; crate::observe::AU_COUNT]>> {
+pub(super) fn aus_by_frame(file: &OpenFaceFile) -> Vec<Option<[f64; crate::observe::AU_COUNT]>> {
     let frames = file.rows.iter().map(|r| r.frame).max().unwrap_or(0).max(0) as usize;
     let mut aus = vec![None; frames];
     for r in file.rows.iter().filter(|r| r.frame >= 1) {

@@ -29,7 +29,7 @@ use neck::{drive_neck, neck_weights, no_neck_controller};
 
 use crate::headneck::{face_motion, posed_face};
 use crate::io::atomic::write_atomic;
-use crate::io::openface::{parse_openface, read_openface, write_openface, FaceRow};
+use crate::io::openface::{read_openface, write_openface, FaceRow, OpenFaceFile};
 use crate::io::rows::{self, num, CsvRow};
 use crate::landmark::Blendshapes;
 use crate::learn::{Mlp, Normalization, Normalizer};
@@ -44,7 +44,6 @@ use network::{au_mse, predict_activations};
 
 #[derive(Clone, Debug)]
 pub struct TransferOptions {
-    pub openface: PathBuf,
     /// A run folder with `unified.safetensors`, `training_aus.csv` and `spec.toml`.
     pub model: PathBuf,
     pub normalize: Normalization,
@@ -59,9 +58,6 @@ pub struct TransferOptions {
     /// The input's pictures (photos or video frames with their landmarks drawn), indexed by
     /// the file's `frame` - 1: renders and the GIF then show each beside the model's face.
     pub pictures: Option<Vec<RgbImage>>,
-    /// The OpenFace file's bytes when it is not on disk yet (the landmarker's, written
-    /// beside the outputs only once the transfer succeeds); `openface` names it.
-    pub openface_bytes: Option<Vec<u8>>,
     /// MediaPipe's blendshapes of the input pictures, indexed like `pictures`.
     pub input_blendshapes: Option<Vec<Option<Blendshapes>>>,
     /// Read the transferred face with MediaPipe's blendshapes (`fidelity.csv`, `fidelity.md`).
@@ -177,23 +173,16 @@ fn unified_network(run: &Path) -> Result<Mlp> {
     Ok(mlp)
 }
 
-/// Runs the transfer and writes `transferred.csv`, `activations.csv`, `mse.csv`, renders of
-/// the chosen frames and, for more than one frame, `transfer.gif`. The network is read only
-/// where the activations are not `opts.fitted`.
-pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
+/// Transfers a file's frames (an OpenFace file's rows, or a picture's from the landmarker:
+/// `OpenFaceFile::from_rows`) and writes `transferred.csv`, `activations.csv`, `mse.csv`,
+/// renders of the chosen frames and, for more than one frame, `transfer.gif`. The network is
+/// read only where the activations are not `opts.fitted`.
+pub fn transfer_frames(file: &OpenFaceFile, opts: &TransferOptions) -> Result<TransferSummary> {
     let run = &opts.model;
     let spec = run_spec(run)?;
-
-    let file = match &opts.openface_bytes {
-        Some(bytes) => parse_openface(bytes.clone(), &opts.openface)?,
-        None => read_openface(&opts.openface)?,
-    };
+    let name = file.path.display();
     if file.rows.is_empty() {
-        bail!(
-            "{}: no row with success = 1 ({} skipped)",
-            opts.openface.display(),
-            file.skipped
-        );
+        bail!("{name}: no row with success = 1 ({} skipped)", file.skipped);
     }
     let reference: Vec<[f64; AU_COUNT]> = file.rows.iter().map(|r| r.aus).collect();
     let flat = network::flat_aus(opts.normalize, &reference);
@@ -246,10 +235,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
     };
     for f in &wanted {
         if !file.rows.iter().any(|r| r.frame == *f) {
-            bail!(
-                "{}: no used row with frame {f} to render",
-                opts.openface.display()
-            );
+            bail!("{name}: no used row with frame {f} to render");
         }
     }
     let dt = match (file.rows[0].timestamp, file.rows[n - 1].timestamp) {
@@ -257,7 +243,7 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
         _ => 1.0 / 30.0,
     };
     let head = if !opts.ignore_pose && file.rows.iter().all(|r| r.pose.is_some()) {
-        Some(drive_neck(opts, &spec, &file.rows, dt)?)
+        Some(drive_neck(opts, &spec, file, dt)?)
     } else {
         None
     };
@@ -333,15 +319,14 @@ pub fn transfer_openface(opts: &TransferOptions) -> Result<TransferSummary> {
             Ok(())
         },
     )
-    .with_context(|| format!("{}: transferring", opts.openface.display()))?;
+    .with_context(|| format!("{name}: transferring"))?;
     let unsolved: Vec<String> = failures
         .iter()
         .map(|(i, why)| format!("frame {}: {why}", file.rows[*i].frame))
         .collect();
     if unsolved.len() == n {
         bail!(
-            "{}: the face converged in none of the {n} frames (first: {})",
-            opts.openface.display(),
+            "{name}: the face converged in none of the {n} frames (first: {})",
             unsolved[0]
         );
     }
@@ -506,12 +491,13 @@ pub fn solve_clip_tolerant<S: Clone>(
     Ok(failures)
 }
 
-/// `facelab transfer PATH`: an OpenFace CSV goes straight to [`transfer_openface`]
+/// `facelab transfer PATH`: an OpenFace CSV's rows go straight to [`transfer_frames`]
 /// (normalization `normalize`, default min-max); a photo, folder, GIF or video first goes
-/// through the built-in landmarker ([`pictures::landmark_input`]), which writes
-/// `openface.csv` into the output folder with AUs read by the run's own observer (its spec's
-/// calibration), so they are on the training data's scale and need no normalization (default
-/// `none`). Returns the landmarker's summary for image inputs.
+/// through the built-in landmarker ([`pictures::landmark_files`]), whose frames carry AUs read
+/// by the run's own observer (its spec's calibration), so they are on the training data's
+/// scale and need no normalization (default `none`); its `openface.csv` and pictures are
+/// written beside the outputs once the transfer succeeds. Returns the landmarker's summary
+/// for image inputs.
 pub fn transfer_path(
     input: &Path,
     opts: &TransferOptions,
@@ -528,14 +514,14 @@ pub fn transfer_path(
         );
     }
     if input_kind(input)? == InputKind::OpenFace {
+        let file = read_openface(input)?;
         let fitted = match TransferMethod::for_input(input, method)? {
             TransferMethod::Network => None,
-            TransferMethod::Landmarks => Some(openface_fit(input, &opts.model)?),
+            TransferMethod::Landmarks => Some(openface_fit(&file, &opts.model)?),
             TransferMethod::Aus => {
                 let spec = run_spec(&opts.model)?;
                 let model = spec.face_source().model()?;
                 let calibration = crate::run::cell::spec_calibration(&spec)?;
-                let file = read_openface(input)?;
                 Some(au_space_fit(
                     &spec,
                     &model,
@@ -551,12 +537,11 @@ pub fn transfer_path(
             Some(_) => Normalization::None,
         };
         let opts = TransferOptions {
-            openface: input.to_path_buf(),
             normalize: normalize.unwrap_or(default),
             fitted,
             ..opts.clone()
         };
-        return Ok((transfer_openface(&opts)?, None));
+        return Ok((transfer_frames(&file, &opts)?, None));
     }
     let spec = run_spec(&opts.model)?;
     // Pictures always have a head pose: without a controller, say so before any work.
@@ -580,26 +565,21 @@ pub fn transfer_path(
             &calibration,
             &landmarked.displacements,
         )?),
-        TransferMethod::Aus => {
-            let file = parse_openface(landmarked.files[0].1.clone(), &landmarked.openface)?;
-            Some(au_space_fit(
-                &spec,
-                &model,
-                &calibration,
-                &aus_by_frame(&file),
-            )?)
-        }
+        TransferMethod::Aus => Some(au_space_fit(
+            &spec,
+            &model,
+            &calibration,
+            &aus_by_frame(&landmarked.frames),
+        )?),
     };
     let opts = TransferOptions {
         fitted,
-        openface: landmarked.openface.clone(),
-        openface_bytes: Some(landmarked.files[0].1.clone()),
         normalize: normalize.unwrap_or(Normalization::None),
         pictures: Some(landmarked.pictures.clone()),
         input_blendshapes: Some(landmarked.blendshapes.clone()),
         ..opts.clone()
     };
-    let mut summary = transfer_openface(&opts)?;
+    let mut summary = transfer_frames(&landmarked.frames, &opts)?;
     landmarked.written = write_files(&opts.out, &landmarked.files)?;
     let mut written = landmarked.written.clone();
     written.append(&mut summary.written);

@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 
 use super::{run_spec, TransferOptions};
 use crate::headneck::Learned;
-use crate::io::openface::FaceRow;
+use crate::io::openface::OpenFaceFile;
 use crate::learn::Mlp;
 use crate::sim::neck::{simulate, BodyState, HeadPose, PoseSequence};
 
@@ -19,15 +19,16 @@ pub(super) struct HeadTrack {
     pub(super) offset: Vec<crate::sim::geom::V3>,
 }
 
-/// Drives the neck with the rows' `pose_Rx, pose_Ry, pose_Rz` (frames `dt` apart) under a
-/// run's learned voluntary controller (`voluntary.safetensors` of `opts.neck`, else of the
-/// face's run, whose spec is `spec`) from the upright rest posture.
+/// Drives the neck with the file's rows' `pose_Rx, pose_Ry, pose_Rz` (frames `dt` apart)
+/// under a run's learned voluntary controller (`voluntary.safetensors` of `opts.neck`, else
+/// of the face's run, whose spec is `spec`) from the upright rest posture.
 pub(super) fn drive_neck(
     opts: &TransferOptions,
     spec: &crate::spec::Spec,
-    rows: &[FaceRow],
+    file: &OpenFaceFile,
     dt: f64,
 ) -> Result<HeadTrack> {
+    let rows = &file.rows;
     let (weights, neck) = neck_run(opts, spec)?;
     let bytes = std::fs::read(&weights).map_err(|_| {
         no_neck_controller(
@@ -53,24 +54,24 @@ pub(super) fn drive_neck(
     // The reader refuses NaN cells, naming the line; clamped frames are named as the file does.
     let (targets, clamped) = targets
         .checked(&neck)
-        .with_context(|| format!("{}: head pose", opts.openface.display()))?;
+        .with_context(|| format!("{}: head pose", file.path.display()))?;
     for (i, w) in clamped.iter().take(5) {
         eprintln!(
             "warning: {}: frame {}: {w}",
-            opts.openface.display(),
+            file.path.display(),
             rows[*i].frame
         );
     }
     if clamped.len() > 5 {
         eprintln!(
             "warning: {}: {} more frames clamped",
-            opts.openface.display(),
+            file.path.display(),
             clamped.len() - 5
         );
     }
     // Sampled at 400 Hz; each frame takes the nearest sample.
     let (pose, offset) = follow(&neck, &mlp, &targets, false)
-        .with_context(|| format!("{}: driving the neck", opts.openface.display()))?;
+        .with_context(|| format!("{}: driving the neck", file.path.display()))?;
     Ok(HeadTrack {
         target: targets.poses.clone(),
         pose,

@@ -18,7 +18,7 @@ use std::process::{Command, Stdio};
 use anyhow::{bail, Context, Result};
 
 use crate::io::blendshapes::blendshapes_csv;
-use crate::io::openface::FaceRow;
+use crate::io::openface::{FaceRow, OpenFaceFile};
 use crate::io::photo::decode_rgb;
 use crate::io::rows::{self, num, CsvRow};
 use crate::landmark::{metric, Blendshapes, FaceMesh, Landmarker, RgbFrame, MESH_POINTS};
@@ -467,6 +467,9 @@ pub struct LandmarkOutput {
     pub kind: InputKind,
     /// `DIR/openface.csv`.
     pub openface: PathBuf,
+    /// The frames as `openface.csv` records them (each value at OpenFace's decimals), what a
+    /// transfer of the input works from.
+    pub frames: OpenFaceFile,
     /// Files written, or to write, under `DIR`: `openface.csv` first, `landmarks.csv`,
     /// `blendshapes.csv` and the picture.
     pub files: Vec<(&'static str, Vec<u8>)>,
@@ -610,6 +613,7 @@ pub fn landmark_files(
     Ok(LandmarkOutput {
         kind,
         openface: out.join("openface.csv"),
+        frames: OpenFaceFile::from_rows(&out.join("openface.csv"), &rows),
         files,
         written: Vec::new(),
         faces,

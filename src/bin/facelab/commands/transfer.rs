@@ -25,7 +25,6 @@ pub fn run(args: TransferArgs) -> anyhow::Result<()> {
     let (summary, landmarked) = transfer_path(
         &input,
         &TransferOptions {
-            openface: input.clone(),
             model,
             normalize: Normalization::None,
             out: args.out,
@@ -33,7 +32,6 @@ pub fn run(args: TransferArgs) -> anyhow::Result<()> {
             ignore_pose: args.ignore_pose,
             neck,
             pictures: None,
-            openface_bytes: None,
             input_blendshapes: None,
             judge: !args.no_judge,
             fitted: None,
