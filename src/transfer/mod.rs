@@ -17,6 +17,7 @@ pub mod inverter;
 mod method;
 mod neck;
 pub mod network;
+mod outputs;
 pub mod pictures;
 
 pub(crate) use fit::au_space_fit;
@@ -28,19 +29,15 @@ pub(crate) use neck::follow;
 use neck::{drive_neck, neck_weights, no_neck_controller};
 
 use crate::headneck::{face_motion, posed_face};
-use crate::io::atomic::write_atomic;
-use crate::io::openface::{read_openface, write_openface, FaceRow, OpenFaceFile};
-use crate::io::rows::{self, num, CsvRow};
+use crate::io::openface::{read_openface, OpenFaceFile};
 use crate::landmark::Blendshapes;
 use crate::learn::{Mlp, Normalization, Normalizer};
 use crate::observe::{landmarks, model_observer, AU_COUNT, AU_NAMES};
-use crate::report::compose::{gif_bytes, side_by_side};
+use crate::report::compose::side_by_side;
 use crate::report::render::{render, Camera, RenderOptions};
-use crate::report::save_png;
-use crate::sim::controls::control_names;
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 use fidelity::{Fidelity, JudgeFrames};
-use network::{au_mse, predict_activations};
+use network::predict_activations;
 
 #[derive(Clone, Debug)]
 pub struct TransferOptions {
@@ -193,26 +190,7 @@ pub fn transfer_frames(file: &OpenFaceFile, opts: &TransferOptions) -> Result<Tr
             Some(network::range_map(kind, &reference, &target))
         }
     };
-    let (acts, mut presolved) = match &opts.fitted {
-        Some(fitted) => {
-            let rows = file
-                .rows
-                .iter()
-                .map(|r| {
-                    usize::try_from(r.frame - 1)
-                        .ok()
-                        .and_then(|k| fitted.get(k).cloned().flatten())
-                        .with_context(|| format!("frame {}: no fitted activations", r.frame))
-                })
-                .collect::<Result<Vec<_>>>()?;
-            rows.into_iter().map(|f| (f.activations, f.state)).unzip()
-        }
-        None => {
-            let acts = predict_activations(&unified_network(run)?, map.as_ref(), &reference)?;
-            let none = vec![None; acts.len()];
-            (acts, none)
-        }
-    };
+    let (acts, mut presolved) = frame_activations(file, opts, map.as_ref(), &reference)?;
 
     let source = spec.face_source();
     let model = source.model()?;
@@ -222,22 +200,7 @@ pub fn transfer_frames(file: &OpenFaceFile, opts: &TransferOptions) -> Result<Tr
         ..SolveParams::default()
     };
     let n = file.rows.len();
-    let wanted: Vec<i64> = if opts.render_frames.is_empty() {
-        let mut v = vec![
-            file.rows[0].frame,
-            file.rows[n / 2].frame,
-            file.rows[n - 1].frame,
-        ];
-        v.dedup();
-        v
-    } else {
-        opts.render_frames.clone()
-    };
-    for f in &wanted {
-        if !file.rows.iter().any(|r| r.frame == *f) {
-            bail!("{name}: no used row with frame {f} to render");
-        }
-    }
+    let wanted = frames_to_render(file, opts)?;
     let dt = match (file.rows[0].timestamp, file.rows[n - 1].timestamp) {
         (Some(a), Some(b)) if b > a && n > 1 => (b - a) / (n - 1) as f64,
         _ => 1.0 / 30.0,
@@ -331,127 +294,83 @@ pub fn transfer_frames(file: &OpenFaceFile, opts: &TransferOptions) -> Result<Tr
         );
     }
 
-    let out = &opts.out;
-    let mut written = Vec::new();
-    let rows: Vec<FaceRow> = file
-        .rows
-        .iter()
-        .zip(&transferred)
-        .enumerate()
-        .map(|(i, (r, aus))| FaceRow {
-            aus: *aus,
-            success: solved[i],
-            // The neck's head rotation, with the file's translation.
-            pose: head.as_ref().and_then(|h| {
-                let p = h.pose[i];
-                r.pose.map(|t| [t[0], t[1], t[2], p.pitch, p.yaw, p.roll])
-            }),
-            landmarks_2d: None,
-            landmarks_3d: None,
-            ..r.clone()
-        })
-        .collect();
-    let path = out.join("transferred.csv");
-    write_openface(&path, &rows)?;
-    written.push(path);
-
-    let mut text = format!("frame,{}\n", control_names().join(","));
-    for (r, a) in file.rows.iter().zip(&acts) {
-        text.push_str(&r.frame.to_string());
-        for v in a.values() {
-            text.push_str(&format!(",{v:.6}"));
-        }
-        text.push('\n');
-    }
-    let mut write = |name: &str, bytes: &[u8]| -> Result<()> {
-        let path = out.join(name);
-        write_atomic(&path, bytes)?;
-        written.push(path);
-        Ok(())
-    };
-    write("activations.csv", text.as_bytes())?;
-    // Frames the face could not be solved for are written with success = 0 and left out of
-    // the scores.
-    let (kept_ref, kept_out): (Vec<[f64; AU_COUNT]>, Vec<[f64; AU_COUNT]>) = reference
-        .iter()
-        .zip(&transferred)
-        .zip(&solved)
-        .filter(|(_, ok)| **ok)
-        .map(|((r, t), _)| (*r, *t))
-        .unzip();
-    let mse = au_mse(&kept_ref, &kept_out);
-    let mean = mse.iter().sum::<f64>() / AU_COUNT as f64;
-    let lines: Vec<MseLine> = AU_NAMES
-        .iter()
-        .zip(&mse)
-        .map(|(a, &mse)| (a.to_string(), mse))
-        .chain([("mean".to_string(), mean)])
-        .map(|(au, mse)| MseLine { au, mse })
-        .collect();
-    write("mse.csv", rows::to_csv(&lines).as_bytes())?;
-    let mut pose_error = None;
-    if let Some(h) = &head {
-        let mut text =
-            String::from("frame,target_Rx,target_Ry,target_Rz,pose_Rx,pose_Ry,pose_Rz,error_deg\n");
-        let mut errors = Vec::with_capacity(n);
-        for ((r, target), pose) in file.rows.iter().zip(&h.target).zip(&h.pose) {
-            let e = pose.error_degrees(*target);
-            errors.push(e);
-            text.push_str(&format!(
-                "{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{e:.3}\n",
-                r.frame, target.pitch, target.yaw, target.roll, pose.pitch, pose.yaw, pose.roll
-            ));
-        }
-        write("head_pose.csv", text.as_bytes())?;
-        let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt();
-        pose_error = Some((rms, errors.iter().copied().fold(0.0, f64::max)));
-    }
-    if frames.len() > 1 {
-        let delay = (1000.0 * dt * gif_every as f64).round().max(20.0) as u32;
-        write("transfer.gif", &gif_bytes(&frames, delay)?)?;
-    }
-    for (frame, image) in &stills {
-        let path = out.join(format!("frame_{frame:05}.png"));
-        save_png(image, &path)?;
-        written.push(path);
-    }
-    let fidelity = match judged {
-        Some(j) => {
-            let frames: Vec<i64> = file.rows.iter().map(|r| r.frame).collect();
-            let input: Option<Vec<Option<Blendshapes>>> =
-                opts.input_blendshapes.as_ref().map(|b| {
-                    frames
-                        .iter()
-                        .map(|f| {
-                            usize::try_from(f - 1)
-                                .ok()
-                                .and_then(|k| b.get(k).copied().flatten())
-                        })
-                        .collect()
-                });
-            let fidelity = j.finish(&frames, input);
-            for (name, bytes) in [
-                ("fidelity.csv", fidelity.csv.as_bytes()),
-                ("fidelity.md", fidelity.markdown.as_bytes()),
-            ] {
-                let path = out.join(name);
-                write_atomic(&path, bytes)?;
-                written.push(path);
-            }
-            Some(fidelity)
-        }
-        None => None,
-    };
+    let outputs = outputs::write(outputs::Made {
+        file,
+        opts,
+        reference: &reference,
+        acts: &acts,
+        transferred: &transferred,
+        solved: &solved,
+        head: head.as_ref(),
+        dt,
+        gif_every,
+        frames: &frames,
+        stills: &stills,
+        judged,
+    })?;
     Ok(TransferSummary {
         rows: n,
         skipped: file.skipped,
         unsolved,
-        mse,
-        pose_error,
+        mse: outputs.mse,
+        pose_error: outputs.pose_error,
         flat,
-        fidelity,
-        written,
+        fidelity: outputs.fidelity,
+        written: outputs.written,
     })
+}
+
+/// Each frame's activations and, where a fit already solved it, its face: `opts.fitted`'s,
+/// or the run's unified network's on the frames' AUs (after `map`).
+fn frame_activations(
+    file: &OpenFaceFile,
+    opts: &TransferOptions,
+    map: Option<&Normalizer>,
+    reference: &[[f64; AU_COUNT]],
+) -> Result<(Vec<Activations>, Vec<Option<crate::sim::State>>)> {
+    Ok(match &opts.fitted {
+        Some(fitted) => {
+            let rows = file
+                .rows
+                .iter()
+                .map(|r| {
+                    usize::try_from(r.frame - 1)
+                        .ok()
+                        .and_then(|k| fitted.get(k).cloned().flatten())
+                        .with_context(|| format!("frame {}: no fitted activations", r.frame))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            rows.into_iter().map(|f| (f.activations, f.state)).unzip()
+        }
+        None => {
+            let acts = predict_activations(&unified_network(&opts.model)?, map, reference)?;
+            let none = vec![None; acts.len()];
+            (acts, none)
+        }
+    })
+}
+
+/// The frames to render: `opts.render_frames`, each checked to be a used row, or the first,
+/// middle and last.
+fn frames_to_render(file: &OpenFaceFile, opts: &TransferOptions) -> Result<Vec<i64>> {
+    let (n, name) = (file.rows.len(), file.path.display());
+    let wanted: Vec<i64> = if opts.render_frames.is_empty() {
+        let mut v = vec![
+            file.rows[0].frame,
+            file.rows[n / 2].frame,
+            file.rows[n - 1].frame,
+        ];
+        v.dedup();
+        v
+    } else {
+        opts.render_frames.clone()
+    };
+    for f in &wanted {
+        if !file.rows.iter().any(|r| r.frame == *f) {
+            bail!("{name}: no used row with frame {f} to render");
+        }
+    }
+    Ok(wanted)
 }
 
 /// Solves a clip frame by frame, each from the previous solved frame
@@ -586,16 +505,6 @@ pub fn transfer_path(
     summary.written = written;
     Ok((summary, Some(landmarked)))
 }
-
-/// A line of a transfer's `mse.csv`: an AU (or `mean`) and its MSE against the input.
-#[derive(serde::Serialize, serde::Deserialize)]
-struct MseLine {
-    au: String,
-    #[serde(serialize_with = "num::sci::<6, _>")]
-    mse: f64,
-}
-
-impl CsvRow for MseLine {}
 
 #[cfg(test)]
 mod tests {
