@@ -128,7 +128,15 @@ pub fn read_openface(path: &Path) -> Result<OpenFaceFile, OpenFaceError> {
 }
 
 /// Parses the bytes of an OpenFace CSV file (`path` only names it in errors).
-pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenFaceError> {
+/// The landmark columns of `axes` (`x_0..x_67, y_0..`), in OpenFace's order.
+fn landmark_names(axes: &[&str]) -> Vec<String> {
+    axes.iter()
+        .flat_map(|a| (0..LANDMARK_COUNT).map(move |i| format!("{a}_{i}")))
+        .collect()
+}
+
+/// The layout a file's header gives, and its bytes with `, ` separators made `,`.
+fn header_layout(bytes: Vec<u8>, path: &Path) -> Result<(Layout, Vec<u8>), OpenFaceError> {
     let p = || path.to_path_buf();
     let text_end = bytes
         .iter()
@@ -188,11 +196,6 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
             missing: missing.join(", "),
         });
     }
-    let landmark_names = |axes: &[&str]| -> Vec<String> {
-        axes.iter()
-            .flat_map(|a| (0..LANDMARK_COUNT).map(move |i| format!("{a}_{i}")))
-            .collect()
-    };
     let l2 = landmark_names(&["x", "y"]);
     let l3 = landmark_names(&["X", "Y", "Z"]);
     let layout = Layout {
@@ -205,7 +208,22 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
         landmarks_3d: l3.iter().all(|c| has(c)),
         columns: columns.clone(),
     };
+    Ok((layout, bytes))
+}
 
+/// A column's name and its cells (`None`: not a number).
+type NamedColumn = (String, Vec<Option<f64>>);
+
+/// The columns a parse uses, each read as numbers, in the order of `wanted`: a cell that is
+/// not a number fails with its line, column and text.
+fn read_columns(
+    bytes: &[u8],
+    path: &Path,
+    layout: &Layout,
+) -> Result<Vec<NamedColumn>, OpenFaceError> {
+    let p = || path.to_path_buf();
+    let (columns, image_mode) = (&layout.columns, layout.image_mode);
+    let has = |name: &str| columns.iter().any(|c| c == name);
     // The columns we use, all read as Float64; cells that do not parse become null and are
     // reported below with their line and text.
     let mut wanted: Vec<String> = vec![if image_mode { "face" } else { "frame" }.to_string()];
@@ -224,10 +242,10 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
         wanted.extend(pose_columns().iter().map(|s| s.to_string()));
     }
     if layout.landmarks_2d {
-        wanted.extend(l2.iter().cloned());
+        wanted.extend(landmark_names(&["x", "y"]));
     }
     if layout.landmarks_3d {
-        wanted.extend(l3.iter().cloned());
+        wanted.extend(landmark_names(&["X", "Y", "Z"]));
     }
     let schema: Schema = columns
         .iter()
@@ -246,7 +264,7 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
         .with_columns(Some(wanted.iter().map(|s| s.as_str().into()).collect()))
         .with_ignore_errors(true)
         .with_parse_options(CsvParseOptions::default().with_truncate_ragged_lines(false))
-        .into_reader_with_file_handle(Cursor::new(bytes.as_slice()))
+        .into_reader_with_file_handle(Cursor::new(bytes))
         .finish()
         .map_err(|cause| OpenFaceError::Polars { path: p(), cause })?;
 
@@ -265,7 +283,7 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
     // Line text for error messages (only built when needed).
     let cell_text = |row: usize, name: &str| -> String {
         let index = columns.iter().position(|c| c == name).unwrap_or(0);
-        String::from_utf8_lossy(&bytes)
+        String::from_utf8_lossy(bytes)
             .lines()
             .nth(row + 1)
             .and_then(|l| l.split(',').nth(index))
@@ -273,7 +291,7 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
             .trim()
             .to_string()
     };
-    let mut data: Vec<(String, Vec<Option<f64>>)> = Vec::with_capacity(wanted.len());
+    let mut data: Vec<NamedColumn> = Vec::with_capacity(wanted.len());
     for name in &wanted {
         let values = column(name)?;
         if let Some(row) = values.iter().position(|v| v.is_none()) {
@@ -286,7 +304,14 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
         }
         data.push((name.clone(), values));
     }
-    let n = df.height();
+    Ok(data)
+}
+
+pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenFaceError> {
+    let (layout, bytes) = header_layout(bytes, path)?;
+    let data = read_columns(&bytes, path, &layout)?;
+    let p = || path.to_path_buf();
+    let n = data[0].1.len();
     let get = |name: &str, row: usize| -> Option<f64> {
         data.iter()
             .find(|(c, _)| c == name)
@@ -405,9 +430,7 @@ impl OpenFaceFile {
             (landmarks_3d, &["X", "Y", "Z"]),
         ] {
             if present {
-                for a in axes {
-                    columns.extend((0..LANDMARK_COUNT).map(|i| format!("{a}_{i}")));
-                }
+                columns.extend(landmark_names(axes));
             }
         }
         columns.extend((0..AU_COUNT).map(au_column));
