@@ -115,27 +115,9 @@ pub fn run(
 ) -> Result<Vec<InvertedFrame>> {
     let chosen = selected(reference, p.frame_stride);
     // Normalization maps per cohort, over all of its frames (as Table 2).
-    let target = training_range(Normalization::MinMax, training_aus);
-    let maps: Vec<(CohortKind, crate::learn::Normalizer)> = CohortKind::ALL
-        .iter()
-        .map(|&k| {
-            let all: Vec<[f64; AU_COUNT]> = reference
-                .iter()
-                .filter(|f| f.cohort == k)
-                .map(|f| f.aus)
-                .collect();
-            (k, range_map(Normalization::MinMax, &all, &target))
-        })
-        .collect();
+    let maps = cohort_maps(reference, training_aus);
     // One job per subject: its model solves its frames, the base model scores the methods.
-    let mut jobs: Vec<(CohortKind, usize, Vec<usize>)> = Vec::new();
-    for &i in &chosen {
-        let f = &reference[i];
-        match jobs.last_mut() {
-            Some((k, s, v)) if *k == f.cohort && *s == f.subject => v.push(i),
-            _ => jobs.push((f.cohort, f.subject, vec![i])),
-        }
-    }
+    let jobs = subject_jobs(reference, &chosen);
     let per_job: Vec<Vec<InvertedFrame>> = jobs
         .par_iter()
         .map(|(kind, s, frames)| -> Result<Vec<InvertedFrame>> {
@@ -250,35 +232,15 @@ pub fn run(
                 )?);
                 // Defect correction, keeping the iterate whose nonlinear face is closest.
                 let t = Instant::now();
-                let mut x = fit.a.clone();
-                let mut iterations = fit.iterations;
-                let mut stop = (fit.gradient_norm, fit.converged);
-                let cost = |aus: &[f64; AU_COUNT]| -> f64 {
-                    aus.iter().zip(&r).map(|(a, b)| (a - b).powi(2)).sum()
-                };
-                let mut best: Option<(f64, Vec<f64>)> = None;
-                for step in 0..=p.refinements {
-                    // A correction can ask for activations the nonlinear face cannot reach
-                    // (the solve does not converge): keep the best iterate so far.
-                    let Ok((nl, _)) = inverter.solve(&activations(&x), &mut ws, params) else {
-                        break;
-                    };
-                    let c = cost(&nl);
-                    if best.as_ref().is_none_or(|b| c < b.0) {
-                        best = Some((c, x.clone()));
-                    }
-                    if step == p.refinements {
-                        break;
-                    }
-                    let bl = inverter.basis_aus(&x, &mut surface);
-                    let target: Vec<f64> = (0..AU_COUNT).map(|k| r[k] - (nl[k] - bl[k])).collect();
-                    let mut f = |x: &[f64]| inverter.basis_aus(x, &mut surface);
-                    let next = au_fit(&mut f, &target, &x, 1e-4, 1e-4, 30);
-                    iterations += next.iterations;
-                    stop = (next.gradient_norm, next.converged);
-                    x = next.a;
-                }
-                let x = best.map_or(fit.a.clone(), |b| b.1);
+                let (x, iterations, stop) = corrected(
+                    inverter,
+                    &fit,
+                    &r,
+                    p.refinements,
+                    &mut ws,
+                    &mut surface,
+                    params,
+                );
                 let seconds = basis_seconds + t.elapsed().as_secs_f64();
                 methods.push(score(
                     "aus_refined",
@@ -300,6 +262,84 @@ pub fn run(
         })
         .collect::<Result<_>>()?;
     Ok(per_job.into_iter().flatten().collect())
+}
+
+/// Per cohort, the min-max map of its frames' AUs onto the training data's range (Table 2's
+/// normalized setting).
+fn cohort_maps(
+    reference: &[RefFrame],
+    training_aus: &[[f64; AU_COUNT]],
+) -> Vec<(CohortKind, crate::learn::Normalizer)> {
+    let target = training_range(Normalization::MinMax, training_aus);
+    CohortKind::ALL
+        .iter()
+        .map(|&k| {
+            let all: Vec<[f64; AU_COUNT]> = reference
+                .iter()
+                .filter(|f| f.cohort == k)
+                .map(|f| f.aus)
+                .collect();
+            (k, range_map(Normalization::MinMax, &all, &target))
+        })
+        .collect()
+}
+
+/// The chosen frames grouped by subject, in order: (cohort, subject, frame indices).
+fn subject_jobs(reference: &[RefFrame], chosen: &[usize]) -> Vec<(CohortKind, usize, Vec<usize>)> {
+    let mut jobs: Vec<(CohortKind, usize, Vec<usize>)> = Vec::new();
+    for &i in chosen {
+        let f = &reference[i];
+        match jobs.last_mut() {
+            Some((k, s, v)) if *k == f.cohort && *s == f.subject => v.push(i),
+            _ => jobs.push((f.cohort, f.subject, vec![i])),
+        }
+    }
+    jobs
+}
+
+/// The table's `aus_refined`: the basis fit `fit` of the AUs `r`, corrected `refinements`
+/// times through the nonlinear face (each correction solved at full tolerance from the
+/// basis prediction), keeping the iterate whose face reads closest; with the iterations and
+/// the last stop.
+#[allow(clippy::too_many_arguments)]
+fn corrected(
+    inverter: &Inverter,
+    fit: &crate::invert::Solution,
+    r: &[f64; AU_COUNT],
+    refinements: usize,
+    ws: &mut Workspace,
+    surface: &mut Vec<crate::sim::geom::V3>,
+    params: &SolveParams,
+) -> (Vec<f64>, usize, (f64, bool)) {
+    let mut x = fit.a.clone();
+    let mut iterations = fit.iterations;
+    let mut stop = (fit.gradient_norm, fit.converged);
+    let cost =
+        |aus: &[f64; AU_COUNT]| -> f64 { aus.iter().zip(r).map(|(a, b)| (a - b).powi(2)).sum() };
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    for step in 0..=refinements {
+        // A correction can ask for activations the nonlinear face cannot reach
+        // (the solve does not converge): keep the best iterate so far.
+        let Ok((nl, _)) = inverter.solve(&activations(&x), ws, params) else {
+            break;
+        };
+        let c = cost(&nl);
+        if best.as_ref().is_none_or(|b| c < b.0) {
+            best = Some((c, x.clone()));
+        }
+        if step == refinements {
+            break;
+        }
+        let bl = inverter.basis_aus(&x, surface);
+        let target: Vec<f64> = (0..AU_COUNT).map(|k| r[k] - (nl[k] - bl[k])).collect();
+        let mut f = |x: &[f64]| inverter.basis_aus(x, surface);
+        let next = au_fit(&mut f, &target, &x, 1e-4, 1e-4, 30);
+        iterations += next.iterations;
+        stop = (next.gradient_norm, next.converged);
+        x = next.a;
+    }
+    let x = best.map_or(fit.a.clone(), |b| b.1);
+    (x, iterations, stop)
 }
 
 /// Per cohort and method: AU MSE (mean over 17, AUs / 5, against the clean reading),

@@ -390,21 +390,7 @@ pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
             progress.finish_and_clear();
             Ok(Transfers(out))
         })?;
-        for (setting, frames) in &transfers {
-            for kind in CohortKind::ALL {
-                let idx: Vec<usize> = (0..reference_frames.len())
-                    .filter(|&i| reference_frames[i].cohort == kind)
-                    .collect();
-                let r: Vec<_> = idx.iter().map(|&i| reference_frames[i].aus).collect();
-                let t: Vec<_> = idx.iter().map(|&i| frames[i].aus).collect();
-                rows.push(Row {
-                    seed: *seed,
-                    cohort: kind,
-                    setting: *setting,
-                    mse: au_mse(&r, &t),
-                });
-            }
-        }
+        rows.extend(seed_rows(*seed, &reference_frames, &transfers));
         if first.is_none() {
             first = Some(transfers);
             first_key = key;
@@ -428,4 +414,30 @@ pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {
         first,
         renders,
     })
+}
+
+/// One seed's Table 2 rows: per setting and cohort, the AU MSE of its transfers against the
+/// reference frames.
+fn seed_rows(
+    seed: u64,
+    reference: &[RefFrame],
+    transfers: &[(Setting, Vec<Transferred>)],
+) -> Vec<Row> {
+    let mut rows = Vec::new();
+    for (setting, frames) in transfers {
+        for kind in CohortKind::ALL {
+            let idx: Vec<usize> = (0..reference.len())
+                .filter(|&i| reference[i].cohort == kind)
+                .collect();
+            let r: Vec<_> = idx.iter().map(|&i| reference[i].aus).collect();
+            let t: Vec<_> = idx.iter().map(|&i| frames[i].aus).collect();
+            rows.push(Row {
+                seed,
+                cohort: kind,
+                setting: *setting,
+                mse: au_mse(&r, &t),
+            });
+        }
+    }
+    rows
 }

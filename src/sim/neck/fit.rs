@@ -68,26 +68,7 @@ impl Neck {
             iterations += 1;
             let (k, jh) = self.stiffness(&q, &a, &g, &goal, e);
             // Linearized residual M_a a' + M_q dq - d.
-            let hill = &self.params.hill;
-            let mut m_a = vec![0.0; ROWS * MUSCLES];
-            for (c, (m, geo)) in self.muscles.iter().zip(&ms.geometry).enumerate() {
-                let fl = m.force_length(hill, geo.length);
-                for i in 0..DOF {
-                    m_a[i * MUSCLES + c] = -FIT_TORQUE_SCALE * fl * geo.gradient[i];
-                }
-            }
-            let mut m_q = vec![0.0; ROWS * DOF];
-            for i in 0..DOF {
-                for j in 0..DOF {
-                    m_q[i * DOF + j] = -FIT_TORQUE_SCALE * k[i * DOF + j];
-                }
-                m_q[(DOF + 3 + i) * DOF + i] = w_p;
-            }
-            for row in 0..3 {
-                for j in 0..DOF {
-                    m_q[(DOF + row) * DOF + j] = FIT_ANGLE_SCALE * jh[row * DOF + j];
-                }
-            }
+            let (m_a, m_q) = self.linearized(&ms, &k, &jh, w_p);
             // d = M_a a - r (the residual at a' = a, dq = 0 is r).
             let d: Vec<f64> = (0..ROWS)
                 .map(|row| {
@@ -194,6 +175,41 @@ impl Neck {
             iterations,
             converged,
         })
+    }
+
+    /// The fit's residual linearized at the current posture: its rows (`2 DOF + 3`: scaled
+    /// torques, head angle, posture prior) against the activations (`M_a`, row-major over
+    /// the muscles) and against the joint angles (`M_q`, from the stiffness `k` and the head
+    /// angle's Jacobian `jh`).
+    fn linearized(
+        &self,
+        ms: &MuscleState,
+        k: &[f64],
+        jh: &[f64],
+        w_p: f64,
+    ) -> (Vec<f64>, Vec<f64>) {
+        const ROWS: usize = 2 * DOF + 3;
+        let hill = &self.params.hill;
+        let mut m_a = vec![0.0; ROWS * MUSCLES];
+        for (c, (m, geo)) in self.muscles.iter().zip(&ms.geometry).enumerate() {
+            let fl = m.force_length(hill, geo.length);
+            for i in 0..DOF {
+                m_a[i * MUSCLES + c] = -FIT_TORQUE_SCALE * fl * geo.gradient[i];
+            }
+        }
+        let mut m_q = vec![0.0; ROWS * DOF];
+        for i in 0..DOF {
+            for j in 0..DOF {
+                m_q[i * DOF + j] = -FIT_TORQUE_SCALE * k[i * DOF + j];
+            }
+            m_q[(DOF + 3 + i) * DOF + i] = w_p;
+        }
+        for row in 0..3 {
+            for j in 0..DOF {
+                m_q[(DOF + row) * DOF + j] = FIT_ANGLE_SCALE * jh[row * DOF + j];
+            }
+        }
+        (m_a, m_q)
     }
 }
 
