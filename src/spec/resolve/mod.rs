@@ -394,34 +394,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         tables.push("table1".into());
     }
 
-    let nonneg = |v: f64| (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"));
-    let d = DatasetParams::default();
-    let dataset = DatasetParams {
-        pairs_per_expression: r.integer(
-            "dataset.pairs_per_expression",
-            d.pairs_per_expression as i64,
-            2,
-            1_000_000,
-        )? as usize,
-        test_fraction: r.float("dataset.test_fraction", d.test_fraction, &|v| {
-            (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
-        })?,
-        subdivisions: r.integer("dataset.subdivisions", d.subdivisions as i64, 0, 2)? as u8,
-        tolerance: r.float("dataset.tolerance", d.tolerance, &|v| {
-            (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
-        })?,
-        shear_modulus_fraction: r.float(
-            "dataset.shear_modulus_fraction",
-            d.shear_modulus_fraction,
-            &nonneg,
-        )?,
-        start: SolveStart::parse(&r.choice("dataset.start", d.start.name(), &SolveStart::NAMES)?)
-            .expect("choice checked"),
-        family: Family::parse(&r.choice("dataset.family", d.family.name(), &Family::NAMES)?)
-            .expect("choice checked"),
-        seed: r.integer("dataset.seed", d.seed as i64, 0, i64::MAX)? as u64,
-    };
-    r.forget_if_unset("dataset.family");
+    let dataset = read_dataset(&mut r)?;
     let observer = ObserverNoise {
         noise_sd: r.float("observer.noise_sd", 0.0, &nonneg)?,
         gain_spread: r.float("observer.gain_spread", 0.0, &nonneg)?,
@@ -432,25 +405,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         Source::parse(&r.choice("observer.source", Source::default().name(), &Source::NAMES)?)
             .expect("choice checked");
     r.forget_if_unset("observer.source");
-    let m = ModelParams::default();
-    let model = ModelParams {
-        layers: r.integer("model.layers", m.layers as i64, 1, 16)? as usize,
-        width: r.integer("model.width", m.width as i64, 1, 4096)? as usize,
-    };
-    let t = TrainParams::default();
-    let train = TrainParams {
-        learning_rate: r.float("train.learning_rate", t.learning_rate, &|v| {
-            (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
-        })?,
-        batch_size: r.integer("train.batch_size", t.batch_size as i64, 1, 1_000_000)? as usize,
-        epochs: r.integer("train.epochs", t.epochs as i64, 1, 100_000)? as usize,
-        normalization: Normalization::parse(&r.choice(
-            "train.normalization",
-            t.normalization.name(),
-            &Normalization::NAMES,
-        )?)
-        .expect("choice checked"),
-    };
+    let (model, train) = read_training(&mut r)?;
     if tables.iter().any(|t| t == "inversion") && !tables.iter().any(|t| t == "table2") {
         if let Some(node) = r.get("tables") {
             return Err(r.invalid(
@@ -460,16 +415,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
             ));
         }
     }
-    let iv = InversionParams::default();
-    let inversion = InversionParams {
-        frame_stride: r.integer("inversion.frame_stride", iv.frame_stride as i64, 1, 100_000)?
-            as usize,
-        penalty: r.float("inversion.penalty", iv.penalty, &|v| {
-            (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
-        })?,
-        refinements: r.integer("inversion.refinements", iv.refinements as i64, 0, 20)? as usize,
-        landmark_noise_sd: r.float("inversion.landmark_noise_sd", iv.landmark_noise_sd, &nonneg)?,
-    };
+    let inversion = read_inversion(&mut r)?;
     let headpose = read_headpose(&mut r)?;
     let realfaces = read_realfaces(&mut r, &tables)?;
     let cohort = read_cohort(&mut r)?;

@@ -1,4 +1,5 @@
-//! The spec's sections with nested parameters: `[cohort]`, `[realfaces]`, `[headpose]`.
+//! The spec's sections: `[dataset]`, `[model]` and `[train]`, `[inversion]`, `[cohort]`,
+//! `[realfaces]`, `[headpose]`.
 
 use crate::cohort::{ClipParams, CohortKind, CohortParams, SubjectParams};
 use crate::headneck::HeadposeParams;
@@ -8,6 +9,82 @@ use crate::spec::raw::Value;
 use crate::spec::SpecError;
 
 use super::*;
+
+/// `= v must be >= 0` unless `v` is a finite non-negative number.
+pub(super) fn nonneg(v: f64) -> Option<String> {
+    (!(v >= 0.0 && v.is_finite())).then(|| format!("= {v} must be >= 0"))
+}
+
+/// `[dataset]`.
+pub(super) fn read_dataset(r: &mut Reader) -> Result<DatasetParams, SpecError> {
+    let d = DatasetParams::default();
+    let dataset = DatasetParams {
+        pairs_per_expression: r.integer(
+            "dataset.pairs_per_expression",
+            d.pairs_per_expression as i64,
+            2,
+            1_000_000,
+        )? as usize,
+        test_fraction: r.float("dataset.test_fraction", d.test_fraction, &|v| {
+            (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
+        })?,
+        subdivisions: r.integer("dataset.subdivisions", d.subdivisions as i64, 0, 2)? as u8,
+        tolerance: r.float("dataset.tolerance", d.tolerance, &|v| {
+            (!(v > 0.0 && v < 1.0)).then(|| format!("= {v} must lie in (0, 1)"))
+        })?,
+        shear_modulus_fraction: r.float(
+            "dataset.shear_modulus_fraction",
+            d.shear_modulus_fraction,
+            &nonneg,
+        )?,
+        start: SolveStart::parse(&r.choice("dataset.start", d.start.name(), &SolveStart::NAMES)?)
+            .expect("choice checked"),
+        family: Family::parse(&r.choice("dataset.family", d.family.name(), &Family::NAMES)?)
+            .expect("choice checked"),
+        seed: r.integer("dataset.seed", d.seed as i64, 0, i64::MAX)? as u64,
+    };
+    r.forget_if_unset("dataset.family");
+    Ok(dataset)
+}
+
+/// `[model]` and `[train]`.
+pub(super) fn read_training(r: &mut Reader) -> Result<(ModelParams, TrainParams), SpecError> {
+    let m = ModelParams::default();
+    let model = ModelParams {
+        layers: r.integer("model.layers", m.layers as i64, 1, 16)? as usize,
+        width: r.integer("model.width", m.width as i64, 1, 4096)? as usize,
+    };
+    let t = TrainParams::default();
+    let train = TrainParams {
+        learning_rate: r.float("train.learning_rate", t.learning_rate, &|v| {
+            (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
+        })?,
+        batch_size: r.integer("train.batch_size", t.batch_size as i64, 1, 1_000_000)? as usize,
+        epochs: r.integer("train.epochs", t.epochs as i64, 1, 100_000)? as usize,
+        normalization: Normalization::parse(&r.choice(
+            "train.normalization",
+            t.normalization.name(),
+            &Normalization::NAMES,
+        )?)
+        .expect("choice checked"),
+    };
+    Ok((model, train))
+}
+
+/// `[inversion]`.
+pub(super) fn read_inversion(r: &mut Reader) -> Result<InversionParams, SpecError> {
+    let iv = InversionParams::default();
+    let inversion = InversionParams {
+        frame_stride: r.integer("inversion.frame_stride", iv.frame_stride as i64, 1, 100_000)?
+            as usize,
+        penalty: r.float("inversion.penalty", iv.penalty, &|v| {
+            (!(v > 0.0 && v.is_finite())).then(|| format!("= {v} must be positive"))
+        })?,
+        refinements: r.integer("inversion.refinements", iv.refinements as i64, 0, 20)? as usize,
+        landmark_noise_sd: r.float("inversion.landmark_noise_sd", iv.landmark_noise_sd, &nonneg)?,
+    };
+    Ok(inversion)
+}
 
 pub(super) fn read_cohort(r: &mut Reader) -> Result<CohortParams, SpecError> {
     let d = CohortParams::default();
