@@ -309,58 +309,7 @@ impl Tissue {
                 + params.dermal_fatty_thickness
                 + params.muscle_layer_thickness,
         ];
-        let neighbours = mesh.neighbours();
-        let mut thickness_scale = vec![1.0; n];
-        let place = |scales: &[f64]| -> Vec<V3> {
-            let mut rest = Vec::with_capacity(SHEETS * n);
-            for depth in depths {
-                for v in 0..n {
-                    rest.push(sub(mesh.positions[v], scale(normals[v], depth * scales[v])));
-                }
-            }
-            rest
-        };
-        // Thin the sheets where a prism would be flat or inverted, then let the thinning spread
-        // a little so thickness varies smoothly.
-        let mut rest = place(&thickness_scale);
-        for _pass in 0..200 {
-            let mut bad = vec![false; n];
-            let mut any = false;
-            for tri in &mesh.triangles {
-                for slab in 0..SHEETS - 1 {
-                    let p = prism_nodes(tri, slab, n).map(|i| rest[i]);
-                    let expected = triangle_area(p[0], p[1], p[2])
-                        * (depths[slab + 1] - depths[slab])
-                        * tri.iter().map(|&v| thickness_scale[v]).fold(1.0, f64::min);
-                    if prism_min_tet_volume(&p) < 0.05 * expected {
-                        for &v in tri {
-                            bad[v] = true;
-                        }
-                        any = true;
-                    }
-                }
-            }
-            if !any {
-                break;
-            }
-            for v in 0..n {
-                if bad[v] {
-                    thickness_scale[v] = (thickness_scale[v] * 0.85).max(MIN_THICKNESS_SCALE);
-                }
-            }
-            let smoothed: Vec<f64> = (0..n)
-                .map(|v| {
-                    let mean = neighbours[v]
-                        .iter()
-                        .map(|&u| thickness_scale[u])
-                        .sum::<f64>()
-                        / neighbours[v].len().max(1) as f64;
-                    thickness_scale[v].min(mean * 1.15)
-                })
-                .collect();
-            thickness_scale = smoothed;
-            rest = place(&thickness_scale);
-        }
+        let (thickness_scale, rest) = thinned_sheets(mesh, &normals, &depths);
 
         let areas = mesh.vertex_areas();
         let moduli = [
@@ -425,33 +374,7 @@ impl Tissue {
             }
         }
 
-        // At the lip commissures the surface folds back on itself (incident triangle normals
-        // ~150 degrees apart): no offset direction gives those prisms positive volume. They
-        // keep their springs but carry no volume term or inversion check.
-        let mut prisms = Vec::with_capacity(3 * mesh.triangles.len());
-        let mut degenerate_prisms = 0;
-        for tri in &mesh.triangles {
-            for slab in 0..SHEETS - 1 {
-                let nodes = prism_nodes(tri, slab, n);
-                let p = nodes.map(|i| rest[i]);
-                // The lips are not bound to bone: where the tissue had to be thinned to
-                // near nothing (the commissures and the inner lips) the muscle layer keeps its
-                // springs but no volume element, so the lips can slide over the teeth.
-                let lip = slab == SKULL - 1
-                    && tri
-                        .iter()
-                        .any(|&v| thickness_scale[v] < LIP_THICKNESS_SCALE);
-                if lip || prism_min_tet_volume(&p) <= 0.0 {
-                    degenerate_prisms += 1;
-                    continue;
-                }
-                prisms.push(Prism {
-                    nodes,
-                    rest_volume: prism_volume(&p),
-                    gram: prism_gram(&p),
-                });
-            }
-        }
+        let (prisms, degenerate_prisms) = volume_prisms(mesh, &rest, &thickness_scale);
         Tissue {
             vertex_count: n,
             rest,
@@ -557,6 +480,101 @@ const MIN_THICKNESS_SCALE: f64 = 0.1;
 
 /// Smallest cosine allowed between a vertex's offset direction and its triangles' normals.
 const MIN_NORMAL_COSINE: f64 = 0.35;
+
+/// The sheets' rest positions (`SHEETS` x the mesh's vertices, each offset along its normal
+/// by the layer depths) and each vertex's thickness scale: the sheets are thinned where a
+/// prism would be flat or inverted, and the thinning spreads a little so thickness varies
+/// smoothly.
+fn thinned_sheets(mesh: &Mesh, normals: &[V3], depths: &[f64; SHEETS]) -> (Vec<f64>, Vec<V3>) {
+    let n = mesh.vertex_count();
+    let neighbours = mesh.neighbours();
+    let mut thickness_scale = vec![1.0; n];
+    let place = |scales: &[f64]| -> Vec<V3> {
+        let mut rest = Vec::with_capacity(SHEETS * n);
+        for &depth in depths {
+            for v in 0..n {
+                rest.push(sub(mesh.positions[v], scale(normals[v], depth * scales[v])));
+            }
+        }
+        rest
+    };
+    // Thin the sheets where a prism would be flat or inverted, then let the thinning spread
+    // a little so thickness varies smoothly.
+    let mut rest = place(&thickness_scale);
+    for _pass in 0..200 {
+        let mut bad = vec![false; n];
+        let mut any = false;
+        for tri in &mesh.triangles {
+            for slab in 0..SHEETS - 1 {
+                let p = prism_nodes(tri, slab, n).map(|i| rest[i]);
+                let expected = triangle_area(p[0], p[1], p[2])
+                    * (depths[slab + 1] - depths[slab])
+                    * tri.iter().map(|&v| thickness_scale[v]).fold(1.0, f64::min);
+                if prism_min_tet_volume(&p) < 0.05 * expected {
+                    for &v in tri {
+                        bad[v] = true;
+                    }
+                    any = true;
+                }
+            }
+        }
+        if !any {
+            break;
+        }
+        for v in 0..n {
+            if bad[v] {
+                thickness_scale[v] = (thickness_scale[v] * 0.85).max(MIN_THICKNESS_SCALE);
+            }
+        }
+        let smoothed: Vec<f64> = (0..n)
+            .map(|v| {
+                let mean = neighbours[v]
+                    .iter()
+                    .map(|&u| thickness_scale[u])
+                    .sum::<f64>()
+                    / neighbours[v].len().max(1) as f64;
+                thickness_scale[v].min(mean * 1.15)
+            })
+            .collect();
+        thickness_scale = smoothed;
+        rest = place(&thickness_scale);
+    }
+    (thickness_scale, rest)
+}
+
+/// The prisms that carry a volume term, and how many carry none (the commissures' folded
+/// prisms and the lips' thinned muscle layer).
+fn volume_prisms(mesh: &Mesh, rest: &[V3], thickness_scale: &[f64]) -> (Vec<Prism>, usize) {
+    let n = mesh.vertex_count();
+    // At the lip commissures the surface folds back on itself (incident triangle normals
+    // ~150 degrees apart): no offset direction gives those prisms positive volume. They
+    // keep their springs but carry no volume term or inversion check.
+    let mut prisms = Vec::with_capacity(3 * mesh.triangles.len());
+    let mut degenerate_prisms = 0;
+    for tri in &mesh.triangles {
+        for slab in 0..SHEETS - 1 {
+            let nodes = prism_nodes(tri, slab, n);
+            let p = nodes.map(|i| rest[i]);
+            // The lips are not bound to bone: where the tissue had to be thinned to
+            // near nothing (the commissures and the inner lips) the muscle layer keeps its
+            // springs but no volume element, so the lips can slide over the teeth.
+            let lip = slab == SKULL - 1
+                && tri
+                    .iter()
+                    .any(|&v| thickness_scale[v] < LIP_THICKNESS_SCALE);
+            if lip || prism_min_tet_volume(&p) <= 0.0 {
+                degenerate_prisms += 1;
+                continue;
+            }
+            prisms.push(Prism {
+                nodes,
+                rest_volume: prism_volume(&p),
+                gram: prism_gram(&p),
+            });
+        }
+    }
+    (prisms, degenerate_prisms)
+}
 
 #[cfg(test)]
 mod tests {

@@ -178,29 +178,55 @@ pub(super) fn assemble(
     hessian: bool,
     full: bool,
 ) {
-    let tp = &model.params.tissue;
-    let pat = &ws.pattern;
-    let g = &mut ws.gradient;
-    let h = &mut ws.values;
-    g.fill(0.0);
+    let mut acc = Sums {
+        pat: &ws.pattern,
+        g: &mut ws.gradient,
+        h: &mut ws.values,
+    };
+    acc.g.fill(0.0);
     if hessian {
-        h.fill(0.0);
+        acc.h.fill(0.0);
     }
-    let add_grad = |g: &mut [f64], node: usize, v: V3, sign: f64| {
-        let f = pat.free_index[node];
+    // In this order, so every sum adds its terms as it always has.
+    springs(model, x, &mut acc, hessian, full);
+    prisms(model, x, &mut acc, hessian, full);
+    contacts(model, pose, x, &mut acc, hessian, full);
+    muscles(model, pose, x, &mut acc, hessian);
+}
+
+/// The gradient and the Hessian's values being summed, addressed by node.
+struct Sums<'a> {
+    pat: &'a Pattern,
+    g: &'a mut [f64],
+    h: &'a mut [f64],
+}
+
+impl Sums<'_> {
+    /// Adds `sign v` to a free node's gradient.
+    #[inline]
+    fn grad(&mut self, node: usize, v: V3, sign: f64) {
+        let f = self.pat.free_index[node];
         if f != NONE {
             let f = 3 * f as usize;
-            g[f] += sign * v[0];
-            g[f + 1] += sign * v[1];
-            g[f + 2] += sign * v[2];
+            self.g[f] += sign * v[0];
+            self.g[f + 1] += sign * v[1];
+            self.g[f + 2] += sign * v[2];
         }
-    };
-    let add_diag = |h: &mut [f64], node: usize, k: &[[f64; 3]; 3]| {
-        let f = pat.free_index[node];
+    }
+
+    /// Adds `k` to a free node's diagonal block.
+    #[inline]
+    fn diag(&mut self, node: usize, k: &[[f64; 3]; 3]) {
+        let f = self.pat.free_index[node];
         if f != NONE {
-            add_block(h, &pat.diag[f as usize], k, 1.0);
+            add_block(self.h, &self.pat.diag[f as usize], k, 1.0);
         }
-    };
+    }
+}
+
+/// The tissue's springs (the layers' edges).
+fn springs(model: &FaceModel, x: &[V3], acc: &mut Sums, hessian: bool, full: bool) {
+    let tp = &model.params.tissue;
     for (si, s) in model.tissue.springs.iter().enumerate() {
         let [a, b] = s.nodes;
         let d = sub(x[b], x[a]);
@@ -213,8 +239,8 @@ pub(super) fn assemble(
             tp.epidermis_stiffening_factor,
         );
         let fv = scale(u, force);
-        add_grad(g, a, fv, -1.0);
-        add_grad(g, b, fv, 1.0);
+        acc.grad(a, fv, -1.0);
+        acc.grad(b, fv, 1.0);
         if hessian {
             // kt u u^T + max(f/l, 0) (I - u u^T): the compressive geometric term is dropped
             // so the block stays positive semi-definite.
@@ -224,11 +250,16 @@ pub(super) fn assemble(
                 (force / l).max(0.0)
             };
             let k = iso_plus_outer(geo, u, kt - geo);
-            add_diag(h, a, &k);
-            add_diag(h, b, &k);
-            add_block(h, &pat.spring_off[si], &k, -1.0);
+            acc.diag(a, &k);
+            acc.diag(b, &k);
+            add_block(acc.h, &acc.pat.spring_off[si], &k, -1.0);
         }
     }
+}
+
+/// The prisms' volume and shear terms.
+fn prisms(model: &FaceModel, x: &[V3], acc: &mut Sums, hessian: bool, full: bool) {
+    let tp = &model.params.tissue;
     for (pi, p) in model.tissue.prisms.iter().enumerate() {
         let (v, dv, hv) = prism_volume_derivatives(&p.nodes.map(|i| x[i]));
         // psi(J) = kappa V0 (0.5 (J - 1)^2 + b (J - 1 - ln J)), J = V / V0:
@@ -244,31 +275,30 @@ pub(super) fn assemble(
             coef -= mu / j;
             c += mu / (p.rest_volume * j * j);
             for (&node, f) in p.nodes.iter().zip(gram_forces(p, x).1) {
-                add_grad(g, node, f, mu);
+                acc.grad(node, f, mu);
             }
             if hessian {
                 for a in 0..6 {
-                    add_diag(
-                        h,
+                    acc.diag(
                         p.nodes[a],
                         &iso_plus_outer(mu * p.gram[a][a], [0.0; 3], 0.0),
                     );
                 }
-                for (slots, &(a, b)) in pat.prism_off[pi].iter().zip(&PRISM_PAIRS) {
+                for (slots, &(a, b)) in acc.pat.prism_off[pi].iter().zip(&PRISM_PAIRS) {
                     let k = iso_plus_outer(mu * p.gram[a][b], [0.0; 3], 0.0);
-                    add_block(h, slots, &k, 1.0);
+                    add_block(acc.h, slots, &k, 1.0);
                 }
             }
         }
         for k in 0..6 {
-            add_grad(g, p.nodes[k], dv[k], coef);
+            acc.grad(p.nodes[k], dv[k], coef);
         }
         if hessian {
             // c grad V grad V^T, plus (full) coef hess V; hess V has zero diagonal blocks.
             for k in 0..6 {
-                add_diag(h, p.nodes[k], &outer(dv[k], dv[k], c));
+                acc.diag(p.nodes[k], &outer(dv[k], dv[k], c));
             }
-            for (slots, &(a, b)) in pat.prism_off[pi].iter().zip(&PRISM_PAIRS) {
+            for (slots, &(a, b)) in acc.pat.prism_off[pi].iter().zip(&PRISM_PAIRS) {
                 if slots[0] != NONE {
                     let mut k = outer(dv[a], dv[b], c);
                     if full {
@@ -279,21 +309,22 @@ pub(super) fn assemble(
                             }
                         }
                     }
-                    add_block(h, slots, &k, 1.0);
+                    add_block(acc.h, slots, &k, 1.0);
                 }
             }
         }
     }
+}
+
+/// Contact with the skull, and between the lips.
+fn contacts(model: &FaceModel, pose: &Pose, x: &[V3], acc: &mut Sums, hessian: bool, full: bool) {
+    let tp = &model.params.tissue;
     for (c, &(anchor, normal)) in model.contacts.iter().zip(&pose.skull) {
         let gap = dot(sub(x[c.node], anchor), normal) - c.clearance;
         if gap < 0.0 {
-            add_grad(g, c.node, normal, tp.skull_contact_stiffness * gap);
+            acc.grad(c.node, normal, tp.skull_contact_stiffness * gap);
             if hessian {
-                add_diag(
-                    h,
-                    c.node,
-                    &outer(normal, normal, tp.skull_contact_stiffness),
-                );
+                acc.diag(c.node, &outer(normal, normal, tp.skull_contact_stiffness));
             }
         }
     }
@@ -302,7 +333,7 @@ pub(super) fn assemble(
     let k = tp.lip_contact_stiffness;
     for c in model.lips.active(x) {
         for (i, &node) in c.nodes.iter().enumerate() {
-            add_grad(g, node, [c.grad[2 * i], c.grad[2 * i + 1], 0.0], k * c.gap);
+            acc.grad(node, [c.grad[2 * i], c.grad[2 * i + 1], 0.0], k * c.gap);
         }
         if hessian {
             let local = |r: usize, s: usize| {
@@ -318,16 +349,20 @@ pub(super) fn assemble(
                         }
                     }
                     if i == j {
-                        add_diag(h, c.nodes[i], &block);
-                    } else if let Some(slots) = pat.lip_off.get(&(c.nodes[i], c.nodes[j])) {
+                        acc.diag(c.nodes[i], &block);
+                    } else if let Some(slots) = acc.pat.lip_off.get(&(c.nodes[i], c.nodes[j])) {
                         // Each unordered pair's block is stored once (the lower triangle);
                         // the (i, j) and (j, i) loops each add their half of it.
-                        add_block(h, slots, &block, 0.5);
+                        add_block(acc.h, slots, &block, 0.5);
                     }
                 }
             }
         }
     }
+}
+
+/// The muscles' pulls toward their targets.
+fn muscles(model: &FaceModel, pose: &Pose, x: &[V3], acc: &mut Sums, hessian: bool) {
     let act = pose.activations.values();
     for (i, m) in model.muscles.iter().enumerate() {
         let a = act[i];
@@ -345,12 +380,12 @@ pub(super) fn assemble(
                     let k2 = vertical * vertical;
                     let dd = [d[0], k2 * d[1], 0.0];
                     let rho = (d[0] * d[0] + k2 * d[1] * d[1] + core * core).sqrt();
-                    add_grad(g, node, dd, mag / rho);
+                    acc.grad(node, dd, mag / rho);
                     if hessian {
                         let mut k = outer(dd, dd, -mag / rho.powi(3));
                         k[0][0] += mag / rho;
                         k[1][1] += mag * k2 / rho;
-                        add_diag(h, node, &k);
+                        acc.diag(node, &k);
                     }
                 }
                 _ => {
@@ -359,9 +394,9 @@ pub(super) fn assemble(
                         continue;
                     }
                     let u = scale(d, 1.0 / r);
-                    add_grad(g, node, u, mag);
+                    acc.grad(node, u, mag);
                     if hessian {
-                        add_diag(h, node, &iso_plus_outer(mag / r, u, -mag / r));
+                        acc.diag(node, &iso_plus_outer(mag / r, u, -mag / r));
                     }
                 }
             }
