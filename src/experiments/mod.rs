@@ -36,9 +36,31 @@ mod tests {
     /// A table a spec may list runs: every name `spec` accepts is one experiment's.
     #[test]
     fn every_table_a_spec_accepts_is_one_registered_experiment() {
-        for table in crate::spec::resolve::TABLES {
-            let n = EXPERIMENTS.iter().filter(|e| e.name() == table).count();
-            assert_eq!(n, 1, "{table}: {n} experiments");
+        for table in crate::spec::Table::ALL {
+            let n = EXPERIMENTS
+                .iter()
+                .filter(|e| e.table() == Some(table))
+                .count();
+            assert_eq!(n, 1, "{table:?}: {n} experiments");
+            let e = EXPERIMENTS
+                .iter()
+                .find(|e| e.table() == Some(table))
+                .unwrap();
+            assert_eq!(
+                e.name(),
+                table.name(),
+                "an experiment is named after its table"
+            );
+        }
+        // Each experiment comes after every experiment whose table's products it reads.
+        for (i, e) in EXPERIMENTS.iter().enumerate() {
+            for t in e.reads() {
+                let at = EXPERIMENTS
+                    .iter()
+                    .position(|x| x.table() == Some(t))
+                    .unwrap();
+                assert!(at < i, "{} reads {t:?}, made after it", e.name());
+            }
         }
         let mut names: Vec<&str> = EXPERIMENTS.iter().map(|e| e.name()).collect();
         names.sort();

@@ -31,6 +31,7 @@ use crate::run::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::run::stage::{text, Artifact, Unit};
 use crate::sim::basis::LinearBasis;
 use crate::sim::{solve_from_rest, SolveParams, Workspace};
+use crate::spec::Table;
 use crate::transfer::inverter::{flat, Inverter, AU_PRIOR};
 use crate::transfer::network::predict_activations;
 use crate::transfer::pictures::{
@@ -159,6 +160,10 @@ pub(crate) struct Photos;
 impl Experiment for Photos {
     fn name(&self) -> &'static str {
         "photos"
+    }
+
+    fn table(&self) -> Option<Table> {
+        Some(Table::Photos)
     }
 
     fn first_seed_only(&self) -> bool {

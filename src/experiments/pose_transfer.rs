@@ -257,14 +257,21 @@ impl Experiment for PoseTransfer {
         "pose_transfer"
     }
 
+    fn table(&self) -> Option<crate::spec::Table> {
+        None
+    }
+
     fn first_seed_only(&self) -> bool {
         true
     }
 
+    fn reads(&self) -> Vec<crate::spec::Table> {
+        vec![crate::spec::Table::Table2, crate::spec::Table::Headpose]
+    }
+
+    /// Whenever a spec lists both tables it reads.
     fn wanted(&self, spec: &crate::spec::Spec) -> bool {
-        ["table2", "headpose"]
-            .iter()
-            .all(|n| spec.tables.iter().any(|t| t == n))
+        self.reads().iter().all(|t| spec.tables.contains(t))
     }
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {

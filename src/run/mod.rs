@@ -106,7 +106,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     let cells = spec::load(spec_path, &opts.sets)?;
     // The real files are outside the repository: say what is missing before computing.
     for cell in &cells {
-        if cell.spec.tables.iter().any(|t| t == "realfaces") {
+        if cell.spec.tables.contains(&crate::spec::Table::Realfaces) {
             crate::io::realdata::inputs(&cell.spec.realfaces)
                 .with_context(|| format!("{}", spec_path.display()))?;
         }

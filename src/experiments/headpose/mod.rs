@@ -22,6 +22,7 @@ use crate::run::cell::{self, CellRun, Experiment, Plan, Trained};
 use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::neck::{simulate, BodyState, HeadPose, Neck, PoseSequence, Teacher, Voluntary};
 use crate::sim::FaceModel;
+use crate::spec::Table;
 
 mod report;
 pub use report::{markdown, sequences_csv, static_csv};
@@ -215,6 +216,10 @@ pub(crate) struct VoluntaryWeights(pub(crate) Vec<u8>);
 impl Experiment for Headpose {
     fn name(&self) -> &'static str {
         "headpose"
+    }
+
+    fn table(&self) -> Option<Table> {
+        Some(Table::Headpose)
     }
 
     fn first_seed_only(&self) -> bool {

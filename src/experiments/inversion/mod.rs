@@ -39,6 +39,7 @@ use crate::run::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::expression::ExpressionWeights;
 use crate::sim::{solve_from_rest, Activations, FaceParams, Mesh, SolveParams, Workspace};
+use crate::spec::Table;
 use crate::transfer::network::{predict_activations, range_map, training_range};
 
 use crate::observe::model_observer;
@@ -459,6 +460,10 @@ pub(crate) struct Inversion;
 impl Experiment for Inversion {
     fn name(&self) -> &'static str {
         "inversion"
+    }
+
+    fn table(&self) -> Option<Table> {
+        Some(Table::Inversion)
     }
 
     fn first_seed_only(&self) -> bool {

@@ -32,6 +32,7 @@ use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::basis::LinearBasis;
 use crate::sim::{FaceModel, SolveParams};
 use crate::spec::Spec;
+use crate::spec::Table;
 pub use report::{markdown, sweep_markdown};
 
 // 1: first version.
@@ -195,6 +196,10 @@ struct RealfacesRows(Vec<FileRow>);
 impl Experiment for Realfaces {
     fn name(&self) -> &'static str {
         "realfaces"
+    }
+
+    fn table(&self) -> Option<Table> {
+        Some(Table::Realfaces)
     }
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {

@@ -22,6 +22,10 @@ impl Experiment for Table1 {
         "table1"
     }
 
+    fn table(&self) -> Option<crate::spec::Table> {
+        Some(crate::spec::Table::Table1)
+    }
+
     /// Its units are the networks', which every plan that trains lists first.
     fn plan(&self, _plan: &mut Plan) -> Result<()> {
         Ok(())

@@ -22,6 +22,7 @@ use crate::run::stage::{text, Artifact, Files, Stages, Unit};
 use crate::sim::basis::LinearBasis;
 use crate::sim::{FaceModel, SolveParams};
 use crate::spec::Spec;
+use crate::spec::Table;
 use crate::transfer::network::{au_mse, range_map, training_range, transfer, Setting, Transferred};
 
 mod cohort;
@@ -78,6 +79,10 @@ pub(crate) struct Table2;
 impl Experiment for Table2 {
     fn name(&self) -> &'static str {
         "table2"
+    }
+
+    fn table(&self) -> Option<Table> {
+        Some(Table::Table2)
     }
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {

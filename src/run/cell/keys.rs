@@ -141,8 +141,8 @@ impl Keys {
 }
 
 pub(crate) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
-    let needs_basis =
-        spec.dataset.start == SolveStart::Predicted || spec.tables.iter().any(|t| t == "inversion");
+    let needs_basis = spec.dataset.start == SolveStart::Predicted
+        || spec.tables.contains(&crate::spec::Table::Inversion);
     let basis = needs_basis.then(|| {
         let face = (a.face.as_str(), FaceSettings::of(&spec.dataset));
         Unit::new("basis", BASIS_VERSION, &face, &[]).key

@@ -54,12 +54,21 @@ impl std::fmt::Debug for Registry {
 
 /// One table of a run.
 pub(crate) trait Experiment: Sync {
-    /// Its name in a spec's `tables`.
+    /// Its name (its table's, where it makes one).
     fn name(&self) -> &'static str;
 
-    /// Whether a cell of `spec` runs it: by default, when `tables` lists its name.
+    /// The table of a spec's `tables` it makes, if any.
+    fn table(&self) -> Option<crate::spec::Table>;
+
+    /// The tables whose products it reads (each made by an experiment before it in the
+    /// registry): by default its table's [`crate::spec::Table::needs`].
+    fn reads(&self) -> Vec<crate::spec::Table> {
+        self.table().map_or(Vec::new(), |t| t.needs().to_vec())
+    }
+
+    /// Whether a cell of `spec` runs it: by default, when `tables` lists its table.
     fn wanted(&self, spec: &Spec) -> bool {
-        spec.tables.iter().any(|t| t == self.name())
+        self.table().is_some_and(|t| spec.tables.contains(&t))
     }
 
     /// Whether it reads the cell's networks (the dataset and the training stages).

@@ -25,15 +25,64 @@ use sections::*;
 pub use sections::{LauncherKind, LauncherParams};
 pub use sweep::cells;
 
-/// The tables a spec can ask for.
-pub const TABLES: [&str; 6] = [
-    "table1",
-    "table2",
-    "inversion",
-    "headpose",
-    "realfaces",
-    "photos",
-];
+/// A table a spec's `tables` can ask for.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Table {
+    Table1,
+    Table2,
+    Inversion,
+    Headpose,
+    Realfaces,
+    Photos,
+}
+
+impl Table {
+    pub const ALL: [Table; 6] = [
+        Table::Table1,
+        Table::Table2,
+        Table::Inversion,
+        Table::Headpose,
+        Table::Realfaces,
+        Table::Photos,
+    ];
+
+    /// Its name in `tables` (and its results folder's).
+    pub fn name(self) -> &'static str {
+        match self {
+            Table::Table1 => "table1",
+            Table::Table2 => "table2",
+            Table::Inversion => "inversion",
+            Table::Headpose => "headpose",
+            Table::Realfaces => "realfaces",
+            Table::Photos => "photos",
+        }
+    }
+
+    pub fn parse(name: &str) -> Option<Table> {
+        Table::ALL.into_iter().find(|t| t.name() == name)
+    }
+
+    /// The tables whose products it reads, which a spec that lists it must list too (each
+    /// runs before it: `experiments::REGISTRY`'s order, which a test checks against this).
+    pub fn needs(self) -> &'static [Table] {
+        match self {
+            // Table 2's cohorts and the unified network.
+            Table::Inversion => &[Table::Table2],
+            _ => &[],
+        }
+    }
+
+    /// Why it needs each of [`Table::needs`].
+    fn why(self) -> &'static str {
+        match self {
+            Table::Inversion => "whose cohorts and network it uses",
+            _ => "",
+        }
+    }
+}
 
 /// Everything a run needs, validated.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,7 +93,7 @@ pub struct Spec {
     pub seeds: Vec<u64>,
     /// Which tables to make: "table1", "table2". Default ["table1"]. Table 2 needs the
     /// unified network of Table 1's training stage, so it always trains it.
-    pub tables: Vec<String>,
+    pub tables: Vec<Table>,
     pub dataset: DatasetParams,
     pub observer: ObserverNoise,
     /// The observer's calibration (`observer.calibration`): the gains table
@@ -377,21 +426,23 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
     let mut tables = Vec::new();
     for node in r.list("tables", vec![toml::Value::String("table1".into())])? {
         match &node.value {
-            Value::String(s) if TABLES.contains(&s.as_str()) => tables.push(s.clone()),
+            Value::String(s) if Table::parse(s).is_some() => {
+                tables.push(Table::parse(s).expect("checked"))
+            }
             _ => {
                 return Err(r.invalid(
                     node,
                     "tables",
                     format!(
                         "may list only {}",
-                        TABLES.map(|t| format!("\"{t}\"")).join(", ")
+                        Table::ALL.map(|t| format!("\"{}\"", t.name())).join(", ")
                     ),
                 ))
             }
         }
     }
     if tables.is_empty() {
-        tables.push("table1".into());
+        tables.push(Table::Table1);
     }
 
     let dataset = read_dataset(&mut r)?;
@@ -406,13 +457,20 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
             .expect("choice checked");
     r.forget_if_unset("observer.source");
     let (model, train) = read_training(&mut r)?;
-    if tables.iter().any(|t| t == "inversion") && !tables.iter().any(|t| t == "table2") {
-        if let Some(node) = r.get("tables") {
-            return Err(r.invalid(
-                node,
-                "tables",
-                "lists \"inversion\" without \"table2\", whose cohorts and network it uses".into(),
-            ));
+    for &t in &tables {
+        for need in t.needs() {
+            if let (false, Some(node)) = (tables.contains(need), r.get("tables")) {
+                return Err(r.invalid(
+                    node,
+                    "tables",
+                    format!(
+                        "lists \"{}\" without \"{}\", {}",
+                        t.name(),
+                        need.name(),
+                        t.why()
+                    ),
+                ));
+            }
         }
     }
     let inversion = read_inversion(&mut r)?;

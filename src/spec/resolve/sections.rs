@@ -176,7 +176,7 @@ pub(super) fn read_cohort(r: &mut Reader) -> Result<CohortParams, SpecError> {
 /// values stay as they were.
 pub(super) fn read_realfaces(
     r: &mut Reader,
-    tables: &[String],
+    tables: &[Table],
 ) -> Result<RealfacesParams, SpecError> {
     let d = RealfacesParams::default();
     let files = r.data_file("realfaces.files", &d.files)?;
@@ -199,7 +199,7 @@ pub(super) fn read_realfaces(
     };
     let frame_stride =
         r.integer("realfaces.frame_stride", d.frame_stride as i64, 1, 100_000)? as usize;
-    if !tables.iter().any(|t| t == "realfaces") {
+    if !tables.contains(&Table::Realfaces) {
         for key in [
             "realfaces.files",
             "realfaces.data",
