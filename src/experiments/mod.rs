@@ -10,7 +10,9 @@ pub mod realfaces;
 pub mod table1;
 pub mod table2;
 
-use crate::run::cell::{Experiment, Registry};
+use std::rc::Rc;
+
+use crate::run::cell::{CellRun, Experiment, Registry, Sweep};
 
 /// Every experiment a run can hold, in the order a cell runs them: an experiment comes after
 /// those whose products it reads (the inversion and the pose transfer read Table 2's cohorts,
@@ -27,7 +29,43 @@ const EXPERIMENTS: &[&dyn Experiment] = &[
 ];
 
 /// The registry a run is handed ([`crate::run::RunOptions::registry`]).
-pub const REGISTRY: Registry = Registry(EXPERIMENTS);
+pub const REGISTRY: Registry = Registry(EXPERIMENTS, || Box::<Products>::default());
+
+/// What the experiments of one cell hand each other and the sweep's summary, each set by
+/// the experiment that makes it.
+#[derive(Default)]
+pub(crate) struct Products {
+    /// Table 1's rows.
+    pub(crate) table1: Option<Rc<table1::Table1Rows>>,
+    /// Table 2's cohorts, transfers and rows: the inversion table and the pose transfer run on
+    /// them.
+    pub(crate) table2: Option<Rc<table2::Table2Result>>,
+    /// The head-neck experiment's voluntary network: the pose transfer drives the neck with it.
+    pub(crate) voluntary: Option<Rc<headpose::VoluntaryWeights>>,
+    /// The real-faces table's rows.
+    pub(crate) realfaces: Option<Rc<realfaces::RealfacesRows>>,
+}
+
+impl Products {
+    /// A cell's products.
+    pub(crate) fn of<'c>(cx: &'c mut CellRun) -> &'c mut Products {
+        cx.products
+            .downcast_mut()
+            .expect("a cell's products are the registry's")
+    }
+
+    /// The cells of a sweep whose products hold what `pick` takes, with their names.
+    pub(crate) fn each<T>(
+        sweep: &Sweep,
+        pick: impl Fn(&Products) -> Option<Rc<T>>,
+    ) -> Vec<(String, Rc<T>)> {
+        sweep
+            .products::<Products>()
+            .into_iter()
+            .filter_map(|(name, p)| Some((name.to_string(), pick(p)?)))
+            .collect()
+    }
+}
 
 #[cfg(test)]
 mod tests {

@@ -15,8 +15,9 @@ use rayon::prelude::*;
 use super::table2::RefFrame;
 use crate::cache::{Entry, Lookup};
 use crate::cohort::{CohortKind, CohortParams};
-use crate::experiments::headpose::{self, VoluntaryWeights};
-use crate::experiments::table2::{planned_cohort, Table2Result};
+use crate::experiments::headpose;
+use crate::experiments::table2::planned_cohort;
+use crate::experiments::Products;
 use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Mlp;
 use crate::report::table::{Table, TableRow};
@@ -293,8 +294,8 @@ impl Experiment for PoseTransfer {
 
     fn run(&self, cx: &mut CellRun) -> Result<()> {
         let (t2, weights) = (
-            cx.products.get::<Table2Result>(),
-            cx.products.get::<VoluntaryWeights>(),
+            Products::of(cx).table2.clone(),
+            Products::of(cx).voluntary.clone(),
         );
         let (Some(t2), Some(weights)) = (t2, weights) else {
             bail!("the pose transfer needs Table 2's cohorts and the voluntary network");

@@ -20,7 +20,7 @@ use anyhow::{bail, Context, Result};
 
 use crate::cache::{self, Cache};
 use crate::io::atomic::write_atomic;
-use crate::run::cell::{assets, CellRun, Plan, Products, Registry, Sink, Sweep};
+use crate::run::cell::{assets, CellRun, Plan, Registry, Sink, Sweep};
 use crate::run::stage::Unit;
 use crate::spec;
 
@@ -144,7 +144,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
         outputs: BTreeMap::new(),
     };
     let single = cells.len() == 1;
-    let mut products: Vec<(String, Products)> = Vec::new();
+    let mut products: Vec<(String, Box<dyn std::any::Any>)> = Vec::new();
     for c in &cells {
         let prefix = if single {
             String::new()
@@ -161,6 +161,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             &cache,
             &mut records,
             &mut sink,
+            (opts.registry.1)(),
         );
         for e in opts.registry.0.iter().filter(|e| e.wanted(&c.spec)) {
             e.run(&mut cx)?;

@@ -471,6 +471,7 @@ pub fn task(
         &cache,
         &mut records,
         &mut sink,
+        (registry.1)(),
     );
     for e in experiments.iter().filter(|e| e.wanted(&spec)) {
         e.run(&mut cx)?;

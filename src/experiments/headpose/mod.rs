@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use crate::cache::Entry;
+use crate::experiments::Products;
 use crate::headneck::{
     dataset, face_motion, posed_face, sequences, static_targets, Learned, INPUTS, OUTPUTS,
 };
@@ -23,6 +24,7 @@ use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::neck::{simulate, BodyState, HeadPose, Neck, PoseSequence, Teacher, Voluntary};
 use crate::sim::FaceModel;
 use crate::spec::Table;
+use std::rc::Rc;
 
 mod report;
 pub use report::{markdown, sequences_csv, static_csv};
@@ -252,7 +254,7 @@ impl Experiment for Headpose {
         if let Some(dir) = cx.figures("headpose") {
             figures(&dir, &out, spec, &*cx.model()?)?;
         }
-        cx.products.put(VoluntaryWeights(out.weights));
+        Products::of(cx).voluntary = Some(Rc::new(VoluntaryWeights(out.weights)));
         Ok(())
     }
 }

@@ -28,8 +28,9 @@ use rayon::prelude::*;
 
 use crate::cache::Entry;
 use crate::cohort::{CohortKind, CohortParams, Subject};
+use crate::experiments::table2::planned_cohort;
 use crate::experiments::table2::RefFrame;
-use crate::experiments::table2::{planned_cohort, Table2Result};
+use crate::experiments::Products;
 use crate::invert::{au_fit, Bound, InversionParams};
 use crate::learn::{Mlp, Normalization};
 use crate::observe::au::AU_MAX;
@@ -486,9 +487,9 @@ impl Experiment for Inversion {
 
     fn run(&self, cx: &mut CellRun) -> Result<()> {
         let spec = cx.spec;
-        let t2 = cx
-            .products
-            .get::<Table2Result>()
+        let t2 = Products::of(cx)
+            .table2
+            .clone()
             .context("the inversion table runs on Table 2's cohorts: list \"table2\" first")?;
         let (n, k, model, basis) = (cx.networks()?, cx.keys()?, cx.model()?, cx.basis()?);
         let basis = basis

@@ -18,8 +18,10 @@ use anyhow::{bail, Context, Result};
 
 use crate::cache::{self, Entry};
 use crate::dataset::reader::FaceReader;
+use crate::experiments::Products;
 use crate::transfer::inverter::AU_PRIOR;
 use crate::transfer::network::{au_mse, range_map, training_range, transfer, Setting};
+use std::rc::Rc;
 
 mod report;
 use crate::io::openface::read_openface;
@@ -191,7 +193,7 @@ pub fn unit(
 pub(crate) struct Realfaces;
 
 /// A cell's real-data rows, for the sweep's summary.
-struct RealfacesRows(Vec<FileRow>);
+pub(crate) struct RealfacesRows(Vec<FileRow>);
 
 impl Experiment for Realfaces {
     fn name(&self) -> &'static str {
@@ -224,13 +226,12 @@ impl Experiment for Realfaces {
         rows.extend(through_fit(cx, &files)?);
         cx.output("realfaces.csv", csv(&rows))?;
         cx.table("realfaces.md", &markdown(&rows, cx.spec))?;
-        cx.products.put(RealfacesRows(rows));
+        Products::of(cx).realfaces = Some(Rc::new(RealfacesRows(rows)));
         Ok(())
     }
 
     fn sweep(&self, sweep: &mut Sweep) -> Result<()> {
-        let cells: Vec<(String, Vec<FileRow>)> = sweep
-            .each::<RealfacesRows>()
+        let cells: Vec<(String, Vec<FileRow>)> = Products::each(sweep, |p| p.realfaces.clone())
             .into_iter()
             .map(|(name, r)| (name, r.0.clone()))
             .collect();

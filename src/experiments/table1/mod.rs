@@ -13,7 +13,7 @@ use crate::run::cell::networks::Row;
 use crate::stats;
 
 mod report;
-pub(crate) use report::{sweep_labels, Table1};
+pub(crate) use report::{sweep_labels, Table1, Table1Rows};
 
 /// Zeng et al. Table 1, in `ORDER` (`run::cell::networks::ORDER`), then MSE_All.
 pub const PAPER: [f64; 7] = [

@@ -3,6 +3,7 @@
 //! sweep's Table 1 summary across its cells.
 
 use crate::experiments::table1;
+use crate::experiments::Products;
 use crate::io::rows::{self, num, CsvRow};
 use crate::learn::Curves;
 use crate::report::table::{Table, TableRow};
@@ -12,6 +13,7 @@ use crate::spec::Spec;
 use crate::stats;
 use anyhow::Result;
 use std::path::Path;
+use std::rc::Rc;
 
 /// Table 1: the paper table and figures of the cell's networks (whose record every run that
 /// trains writes, `record`).
@@ -55,7 +57,7 @@ impl Experiment for Table1 {
 }
 
 /// A cell's Table 1 rows, kept for the sweep's summary.
-struct Table1Rows(Vec<Row>);
+pub(crate) struct Table1Rows(Vec<Row>);
 
 /// What every cell that trained writes, whichever tables it has: each seed's held-out test of
 /// every network (`table1.csv`), the learning curves, and, for a single-cell spec, the first
@@ -68,14 +70,13 @@ fn record(cx: &mut CellRun, n: &Networks) -> Result<()> {
         cx.output("unified.safetensors", unified.to_safetensors()?)?;
         cx.output("training_aus.csv", training_aus_csv(&n.samples))?;
     }
-    cx.products.put(Table1Rows(n.rows.clone()));
+    Products::of(cx).table1 = Some(Rc::new(Table1Rows(n.rows.clone())));
     Ok(())
 }
 
 /// A sweep's Table 1 over its cells: `<experiment>.csv`, the summary's first part, a figure.
 fn sweep_record(sweep: &mut Sweep) -> Result<()> {
-    let rows: Vec<(String, Vec<Row>)> = sweep
-        .each::<Table1Rows>()
+    let rows: Vec<(String, Vec<Row>)> = Products::each(sweep, |p| p.table1.clone())
         .into_iter()
         .map(|(name, r)| (name, r.0.clone()))
         .collect();

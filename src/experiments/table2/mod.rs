@@ -14,6 +14,7 @@ use crate::cohort::CohortKind;
 use crate::dataset::reader::FaceReader;
 use crate::dataset::Sample;
 use crate::experiments::realfaces;
+use crate::experiments::Products;
 use crate::io::face::FaceSource;
 use crate::learn::Mlp;
 use crate::observe::{Calibration, AU_COUNT};
@@ -24,6 +25,7 @@ use crate::sim::{FaceModel, SolveParams};
 use crate::spec::Spec;
 use crate::spec::Table;
 use crate::transfer::network::{au_mse, range_map, training_range, transfer, Setting, Transferred};
+use std::rc::Rc;
 
 mod cohort;
 mod renders;
@@ -154,13 +156,12 @@ impl Experiment for Table2 {
             }
             bars(&figures.join("au_mse_bars.png"), &t2.rows)?;
         }
-        cx.products.put(t2);
+        Products::of(cx).table2 = Some(Rc::new(t2));
         Ok(())
     }
 
     fn sweep(&self, sweep: &mut Sweep) -> Result<()> {
-        let cells: Vec<(String, Vec<Row>)> = sweep
-            .each::<Table2Result>()
+        let cells: Vec<(String, Vec<Row>)> = Products::each(sweep, |p| p.table2.clone())
             .into_iter()
             .map(|(name, t2)| (name, t2.rows.clone()))
             .collect();

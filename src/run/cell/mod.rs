@@ -10,8 +10,7 @@
 //! and [`Products`], where an experiment leaves what a later one reads (Table 2's cohorts for
 //! the inversion and the pose transfer, the voluntary neck network for the pose transfer).
 
-use std::any::{Any, TypeId};
-use std::collections::HashMap;
+use std::any::Any;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
@@ -42,7 +41,12 @@ pub(crate) const TRAIN_VERSION: u32 = 1;
 /// The experiments a run may hold, in the order a cell runs them
 /// (`facelab::experiments::REGISTRY`). The run machinery is handed them and names none.
 #[derive(Clone, Copy)]
-pub struct Registry(pub(crate) &'static [&'static dyn Experiment]);
+pub struct Registry(
+    pub(crate) &'static [&'static dyn Experiment],
+    /// A cell's empty products: the experiments' own typed struct, which the run holds for
+    /// them without naming it.
+    pub(crate) fn() -> Box<dyn Any>,
+);
 
 impl std::fmt::Debug for Registry {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -116,31 +120,12 @@ pub(crate) trait Sink {
     fn figures(&self) -> &Path;
 }
 
-/// What an experiment leaves for later ones in the same cell (and for the sweep's summary),
-/// one value per type.
-#[derive(Default)]
-pub(crate) struct Products(HashMap<TypeId, Rc<dyn Any>>);
-
-impl Products {
-    pub(crate) fn put<T: Any>(&mut self, value: T) {
-        self.0.insert(TypeId::of::<T>(), Rc::new(value));
-    }
-
-    pub(crate) fn get<T: Any>(&self) -> Option<Rc<T>> {
-        let value = self.0.get(&TypeId::of::<T>())?.clone();
-        Some(
-            value
-                .downcast::<T>()
-                .expect("products are stored under their type"),
-        )
-    }
-}
-
 /// One sweep cell of a run, as its experiments see it.
 pub(crate) struct CellRun<'a> {
     pub(crate) spec: &'a Spec,
     pub(crate) assets: &'a Assets,
-    pub(crate) products: Products,
+    /// What its experiments hand each other (the registry's typed struct).
+    pub(crate) products: Box<dyn Any>,
     cell: &'a str,
     /// The cell's folder in the run folder: empty for a single-cell spec, `name/` in a sweep.
     prefix: String,
@@ -165,11 +150,12 @@ impl<'a> CellRun<'a> {
         cache: &'a Cache,
         records: &'a mut Vec<StageRecord>,
         sink: &'a mut dyn Sink,
+        products: Box<dyn Any>,
     ) -> CellRun<'a> {
         CellRun {
             spec,
             assets,
-            products: Products::default(),
+            products,
             cell,
             prefix,
             single,
@@ -277,7 +263,7 @@ pub(crate) struct Sweep<'a> {
     /// The spec's experiment name: the summary's file names.
     pub(crate) experiment: &'a str,
     /// Every cell's name and products, in the spec's order.
-    pub(crate) cells: &'a [(String, Products)],
+    pub(crate) cells: &'a [(String, Box<dyn Any>)],
     /// The summary's Markdown, each experiment appending its part.
     pub(crate) markdown: String,
     sink: &'a mut dyn Sink,
@@ -286,7 +272,7 @@ pub(crate) struct Sweep<'a> {
 impl<'a> Sweep<'a> {
     pub(crate) fn new(
         experiment: &'a str,
-        cells: &'a [(String, Products)],
+        cells: &'a [(String, Box<dyn Any>)],
         sink: &'a mut dyn Sink,
     ) -> Sweep<'a> {
         Sweep {
@@ -297,11 +283,16 @@ impl<'a> Sweep<'a> {
         }
     }
 
-    /// The cells that made a `T`, with their names.
-    pub(crate) fn each<T: Any>(&self) -> Vec<(String, Rc<T>)> {
+    /// Every cell's name and products, as the registry's type `P`.
+    pub(crate) fn products<P: Any>(&self) -> Vec<(&str, &P)> {
         self.cells
             .iter()
-            .filter_map(|(name, p)| Some((name.clone(), p.get::<T>()?)))
+            .map(|(name, p)| {
+                let p = p
+                    .downcast_ref()
+                    .expect("a cell's products are the registry's type");
+                (name.as_str(), p)
+            })
             .collect()
     }
 
