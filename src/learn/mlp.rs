@@ -104,7 +104,7 @@ impl Normalizer {
 /// A trained (or initialized) network with its input normalization.
 pub struct Mlp {
     /// (weight out x in, bias out) per layer.
-    layers: Vec<(Var, Var)>,
+    pub(super) layers: Vec<(Var, Var)>,
     pub normalizer: Normalizer,
     pub inputs: usize,
     pub outputs: usize,

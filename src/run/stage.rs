@@ -220,6 +220,68 @@ fn store<T: Artifact>(
     Ok((value, seconds, false))
 }
 
+/// A unit of a group, stored: its index, its artifact, its seconds and whether another run
+/// had stored it.
+type Stored<T> = (usize, (T, f64, bool));
+
+/// `store` for a group of units computed by one call: each locked, those another run stored
+/// meanwhile read back, the rest computed together and stored one by one.
+fn store_group<T: Artifact>(
+    cache: &Cache,
+    names: &[String],
+    units: &[Unit],
+    members: &[usize],
+    compute: &impl Fn(&[usize]) -> Result<Vec<T>>,
+) -> Result<Vec<Stored<T>>> {
+    let t = Instant::now();
+    let mut locks = Vec::with_capacity(members.len());
+    for &i in members {
+        let unit = &units[i];
+        locks.push(cache.lock(unit.stage, &unit.key, &mut |owner| {
+            eprintln!(
+                "{}: another run ({owner}) is computing it; waiting",
+                names[i]
+            );
+        })?);
+    }
+    let mut out = Vec::with_capacity(members.len());
+    let mut todo = Vec::new();
+    for &i in members {
+        match lookup(cache, &names[i], &units[i])? {
+            Some(value) => out.push((i, (value, t.elapsed().as_secs_f64(), true))),
+            None => todo.push(i),
+        }
+    }
+    if !todo.is_empty() {
+        if verbosity() != Verbosity::Quiet {
+            for &i in &todo {
+                eprintln!("{}: computing", names[i]);
+            }
+        }
+        let values = compute(&todo)?;
+        anyhow::ensure!(
+            values.len() == todo.len(),
+            "a group computed {} artifacts for {} units",
+            values.len(),
+            todo.len()
+        );
+        let seconds = t.elapsed().as_secs_f64() / todo.len() as f64;
+        for (&i, value) in todo.iter().zip(values) {
+            cache.put(units[i].stage, &units[i].key, &value.encode()?)?;
+            if verbosity() != Verbosity::Quiet {
+                eprintln!(
+                    "{}: done in {} (with its group)",
+                    names[i],
+                    duration(seconds)
+                );
+            }
+            out.push((i, (value, seconds, false)));
+        }
+    }
+    drop(locks);
+    Ok(out)
+}
+
 /// The unit's artifact if the cache holds a complete entry; a damaged entry is named (it
 /// will be recomputed).
 fn lookup<T: Artifact>(cache: &Cache, name: &str, unit: &Unit) -> Result<Option<T>> {
@@ -322,6 +384,48 @@ impl<'a> Stages<'a> {
             .map(|&i| Ok((i, store(cache, &names[i], &units[i], || compute(i))?)))
             .collect::<Result<_>>()?;
         for (i, (value, seconds, hit)) in computed {
+            found[i] = Some((value, seconds));
+            hits[i] = hit;
+        }
+        let mut out = Vec::with_capacity(units.len());
+        for ((unit, hit), slot) in units.iter().zip(hits).zip(found) {
+            let (value, seconds) = slot.context("every missing unit is computed")?;
+            self.record(unit, hit, seconds);
+            out.push(value);
+        }
+        Ok(out)
+    }
+
+    /// Like [`Stages::get_or_compute_each`], for units computed best together: each group's
+    /// missing units go to one `compute(members)` call (the groups in parallel), which returns
+    /// their artifacts in the members' order; each is stored under its own unit, so what a
+    /// unit's artifact is may not depend on which units share its call. Every unit of a group
+    /// is locked while it computes. A computed unit records its group's time shared evenly.
+    pub fn get_or_compute_groups<T: Artifact + Send>(
+        &mut self,
+        units: &[Unit],
+        groups: &[Vec<usize>],
+        compute: impl Fn(&[usize]) -> Result<Vec<T>> + Sync,
+    ) -> Result<Vec<T>> {
+        use rayon::prelude::*;
+        let mut found: Vec<Option<(T, f64)>> = Vec::with_capacity(units.len());
+        for unit in units {
+            let t = Instant::now();
+            found.push(self.lookup(unit)?.map(|v| (v, t.elapsed().as_secs_f64())));
+        }
+        let mut hits: Vec<bool> = found.iter().map(Option::is_some).collect();
+        let missing: Vec<Vec<usize>> = groups
+            .iter()
+            .map(|g| g.iter().copied().filter(|&i| !hits[i]).collect::<Vec<_>>())
+            .filter(|g| !g.is_empty())
+            .collect();
+        let names: Vec<String> = units.iter().map(|u| self.name(u)).collect();
+        let cache = self.cache;
+        let computed: Vec<Vec<Stored<T>>> = missing
+            .par_iter()
+            .map(|members| store_group(cache, &names, units, members, &compute))
+            .collect::<Result<_>>()?;
+        for (i, (value, seconds, hit)) in computed.into_iter().flatten() {
             found[i] = Some((value, seconds));
             hits[i] = hit;
         }

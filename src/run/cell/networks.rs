@@ -294,23 +294,56 @@ pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -
         .iter()
         .map(|(_, key)| Unit::keyed("train", key))
         .collect();
+    // One batched model per network kind: its seeds share every shape and step count, and
+    // each network's bytes are its own whatever shares its batch (`learn::batch`).
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for kind in Network::all() {
+        let members: Vec<usize> = (0..k.train.len())
+            .filter(|&i| k.train[i].0 .1 == kind)
+            .collect();
+        if !members.is_empty() {
+            groups.push(members);
+        }
+    }
     let trained = learn::one_thread_each(|| {
-        stages.get_or_compute_each(&units, |i| {
-            let ((seed, network), _) = &k.train[i];
-            let split = split(&samples, spec.dataset.test_fraction, *seed);
-            let (train_pairs, test_pairs) = network_pairs(*network, &samples, &split, &a.facs);
-            let mut rng = stream(*seed, &format!("train/{}", network.name()));
-            let mut uniform = || rng.uniform();
-            let (mlp, curves) = learn::train(
-                &train_pairs,
-                &test_pairs,
-                &spec.model,
-                &spec.train,
-                &mut uniform,
-            )
-            .with_context(|| format!("training the {} network, seed {seed}", network.name()))?;
-            progress.inc(1);
-            Ok(Trained { mlp, curves })
+        stages.get_or_compute_groups(&units, &groups, |members| {
+            let sets: Vec<(Pairs, Pairs)> = members
+                .iter()
+                .map(|&i| {
+                    let (seed, network) = k.train[i].0;
+                    let split = split(&samples, spec.dataset.test_fraction, seed);
+                    network_pairs(network, &samples, &split, &a.facs)
+                })
+                .collect();
+            let mut streams: Vec<_> = members
+                .iter()
+                .map(|&i| {
+                    let (seed, network) = k.train[i].0;
+                    stream(seed, &format!("train/{}", network.name()))
+                })
+                .collect();
+            let mut sources: Vec<_> = streams.iter_mut().map(|r| move || r.uniform()).collect();
+            let mut jobs: Vec<learn::Job> = sets
+                .iter()
+                .zip(sources.iter_mut())
+                .map(|((train, test), uniform)| learn::Job {
+                    train,
+                    test,
+                    uniform,
+                })
+                .collect();
+            let trained = learn::train_batch(&mut jobs, &spec.model, &spec.train).map_err(|e| {
+                let (seed, network) = k.train[members[e.index]].0;
+                anyhow::Error::new(e.error).context(format!(
+                    "training the {} network, seed {seed}",
+                    network.name()
+                ))
+            })?;
+            progress.inc(members.len() as u64);
+            Ok(trained
+                .into_iter()
+                .map(|(mlp, curves)| Trained { mlp, curves })
+                .collect())
         })
     })?;
     progress.finish_and_clear();
