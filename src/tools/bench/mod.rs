@@ -127,7 +127,8 @@ pub fn bench_observe(frames: usize, out: &mut impl Write) -> Result<()> {
 
 /// `facelab bench train`: the training loop alone (data in memory) for the unified network's
 /// shape, 17 -> 4 x 100 -> 56, on `pairs` synthetic pairs (uniform AUs on 0..5, targets a
-/// fixed smooth function of them), `epochs` epochs, batch 32. `export` writes the pairs as CSV
+/// fixed smooth function of them), `epochs` epochs, batch 32, alone and five of it as one
+/// batched model (`learn::batch`). `export` writes the pairs as CSV
 /// (17 inputs then 56 targets per row) so another framework can train on the same data.
 pub fn bench_train(
     pairs: usize,
@@ -185,6 +186,31 @@ pub fn bench_train(
     )?;
     let secs = t.elapsed().as_secs_f64();
     line(out, "train.unified", secs, "s")?;
+    // The same network five times (a kind's seeds) as one batched model, each with its own
+    // initialization stream: what the run's training stage does per network kind.
+    const SEEDS: usize = 5;
+    let mut streams: Vec<_> = (0..SEEDS as u64)
+        .map(|s| stream(1 + s, "bench/train/init"))
+        .collect();
+    let mut sources: Vec<_> = streams.iter_mut().map(|r| move || r.uniform()).collect();
+    let mut jobs: Vec<crate::learn::Job> = sources
+        .iter_mut()
+        .map(|uniform| crate::learn::Job {
+            train: &data,
+            test: &empty,
+            uniform,
+        })
+        .collect();
+    let t = Instant::now();
+    crate::learn::train_batch(&mut jobs, &ModelParams::default(), &params)?;
+    let batched = t.elapsed().as_secs_f64();
+    line(out, "train.batched_5", batched, "s")?;
+    line(
+        out,
+        "train.batched_per_network",
+        batched / SEEDS as f64,
+        "s",
+    )?;
     line(out, "train.pairs", pairs as f64, "count")?;
     line(out, "train.epochs", epochs as f64, "count")?;
     line(
