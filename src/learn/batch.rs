@@ -24,11 +24,12 @@ pub struct Job<'a> {
     pub uniform: &'a mut dyn FnMut() -> f64,
 }
 
-/// A job of a batch failed: its index in the batch, and why.
+/// A batch failed: the index of the network it failed on (`None`: the batch as a whole, e.g.
+/// a tensor operation), and why.
 #[derive(Debug, thiserror::Error)]
-#[error("network {index} of the batch: {error}")]
+#[error("{}: {error}", index.map_or("the batch".to_string(), |i| format!("network {i} of the batch")))]
 pub struct BatchError {
-    pub index: usize,
+    pub index: Option<usize>,
     #[source]
     pub error: LearnError,
 }
@@ -47,9 +48,14 @@ pub fn train_batch(
     model: &ModelParams,
     params: &TrainParams,
 ) -> Result<Vec<(Mlp, Curves)>, BatchError> {
-    let at = |index: usize| move |error: LearnError| BatchError { index, error };
+    let at = |index: usize| {
+        move |error: LearnError| BatchError {
+            index: Some(index),
+            error,
+        }
+    };
     let on = |e: candle_core::Error| BatchError {
-        index: 0,
+        index: None,
         error: e.into(),
     };
     assert!(batchable(jobs), "a batch holds networks of one shape");

@@ -333,11 +333,14 @@ pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -
                 })
                 .collect();
             let trained = learn::train_batch(&mut jobs, &spec.model, &spec.train).map_err(|e| {
-                let (seed, network) = k.train[members[e.index]].0;
-                anyhow::Error::new(e.error).context(format!(
-                    "training the {} network, seed {seed}",
-                    network.name()
-                ))
+                let what = match e.index {
+                    Some(i) => {
+                        let (seed, network) = k.train[members[i]].0;
+                        format!("training the {} network, seed {seed}", network.name())
+                    }
+                    None => format!("training the {} networks", k.train[members[0]].0 .1.name()),
+                };
+                anyhow::Error::new(e.error).context(what)
             })?;
             progress.inc(members.len() as u64);
             Ok(trained
