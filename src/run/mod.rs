@@ -21,7 +21,7 @@ use anyhow::{bail, Context, Result};
 use crate::cache::{self, Cache};
 use crate::io::atomic::write_atomic;
 use crate::run::cell::{assets, CellRun, Plan, Registry, Sink, Sweep};
-use crate::run::stage::Unit;
+use crate::run::stage::{Unit, Verbosity};
 use crate::spec;
 
 pub mod cell;
@@ -49,6 +49,8 @@ pub struct RunOptions {
     pub assemble: Option<PathBuf>,
     /// The experiments a cell may run (`facelab::experiments::REGISTRY`).
     pub registry: Registry,
+    /// What the run prints (the command line's `--quiet` / `--verbose`).
+    pub verbosity: Verbosity,
 }
 
 /// Where a spec's run runs: `--launcher` if given, else the spec's `[launcher] kind`.
@@ -162,6 +164,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
             &mut records,
             &mut sink,
             (opts.registry.1)(),
+            opts.verbosity,
         );
         for e in opts.registry.0.iter().filter(|e| e.wanted(&c.spec)) {
             e.run(&mut cx)?;
@@ -356,7 +359,12 @@ pub(super) fn recorded(run_dir: &Path) -> Result<(serde_json::Value, Vec<String>
     Ok((manifest, cells))
 }
 
-pub fn verify(run_dir: &Path, threads: usize, registry: Registry) -> Result<Vec<String>> {
+pub fn verify(
+    run_dir: &Path,
+    threads: usize,
+    registry: Registry,
+    verbosity: Verbosity,
+) -> Result<Vec<String>> {
     // Rerunning each cell's recorded spec (not the spec path as typed then, which may have
     // changed since) is what makes this a check of the run.
     let (manifest, cells) = recorded(run_dir)?;
@@ -376,6 +384,7 @@ pub fn verify(run_dir: &Path, threads: usize, registry: Registry) -> Result<Vec<
                 publish: false,
                 assemble: None,
                 registry,
+                verbosity,
             },
         );
         let summary = match summary {

@@ -437,6 +437,7 @@ pub fn task(
     array: &str,
     index: Option<usize>,
     registry: Registry,
+    verbosity: crate::run::stage::Verbosity,
 ) -> Result<()> {
     let started = Instant::now();
     let launch = read_launch(launch_file)?;
@@ -472,6 +473,7 @@ pub fn task(
         &mut records,
         &mut sink,
         (registry.1)(),
+        verbosity,
     );
     for e in experiments.iter().filter(|e| e.wanted(&spec)) {
         e.run(&mut cx)?;

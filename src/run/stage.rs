@@ -5,7 +5,7 @@
 //! status report lists and what a cluster launcher submits one by one.
 
 use std::io::IsTerminal;
-use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -96,21 +96,6 @@ pub enum Verbosity {
     Verbose,
 }
 
-static VERBOSITY: AtomicU8 = AtomicU8::new(1);
-
-/// Sets what runs print from now on (the command line's `--quiet` / `--verbose`).
-pub fn set_verbosity(v: Verbosity) {
-    VERBOSITY.store(v as u8, Ordering::Relaxed);
-}
-
-fn verbosity() -> Verbosity {
-    match VERBOSITY.load(Ordering::Relaxed) {
-        0 => Verbosity::Quiet,
-        1 => Verbosity::Normal,
-        _ => Verbosity::Verbose,
-    }
-}
-
 /// How often a progress line is printed when the output is not a terminal.
 const LINE_EVERY: Duration = Duration::from_secs(10);
 
@@ -128,8 +113,7 @@ pub struct Progress {
 }
 
 impl Progress {
-    fn new(total: u64, label: &str) -> Progress {
-        let v = verbosity();
+    fn new(total: u64, label: &str, v: Verbosity) -> Progress {
         let terminal = std::io::stderr().is_terminal();
         let bar = (v != Verbosity::Quiet && terminal).then(|| {
             let b = ProgressBar::new(total);
@@ -199,22 +183,23 @@ fn store<T: Artifact>(
     cache: &Cache,
     name: &str,
     unit: &Unit,
+    v: Verbosity,
     compute: impl FnOnce() -> Result<T>,
 ) -> Result<(T, f64, bool)> {
     let t = Instant::now();
     let _lock = cache.lock(unit.stage, &unit.key, &mut |owner| {
         eprintln!("{name}: another run ({owner}) is computing it; waiting");
     })?;
-    if let Some(value) = lookup(cache, name, unit)? {
+    if let Some(value) = lookup(cache, name, unit, v)? {
         return Ok((value, t.elapsed().as_secs_f64(), true));
     }
-    if verbosity() != Verbosity::Quiet {
+    if v != Verbosity::Quiet {
         eprintln!("{name}: computing");
     }
     let value = compute()?;
     cache.put(unit.stage, &unit.key, &value.encode()?)?;
     let seconds = t.elapsed().as_secs_f64();
-    if verbosity() != Verbosity::Quiet {
+    if v != Verbosity::Quiet {
         eprintln!("{name}: done in {}", duration(seconds));
     }
     Ok((value, seconds, false))
@@ -231,6 +216,7 @@ fn store_group<T: Artifact>(
     names: &[String],
     units: &[Unit],
     members: &[usize],
+    v: Verbosity,
     compute: &impl Fn(&[usize]) -> Result<Vec<T>>,
 ) -> Result<Vec<Stored<T>>> {
     let t = Instant::now();
@@ -247,13 +233,13 @@ fn store_group<T: Artifact>(
     let mut out = Vec::with_capacity(members.len());
     let mut todo = Vec::new();
     for &i in members {
-        match lookup(cache, &names[i], &units[i])? {
+        match lookup(cache, &names[i], &units[i], v)? {
             Some(value) => out.push((i, (value, t.elapsed().as_secs_f64(), true))),
             None => todo.push(i),
         }
     }
     if !todo.is_empty() {
-        if verbosity() != Verbosity::Quiet {
+        if v != Verbosity::Quiet {
             for &i in &todo {
                 eprintln!("{}: computing", names[i]);
             }
@@ -268,7 +254,7 @@ fn store_group<T: Artifact>(
         let seconds = t.elapsed().as_secs_f64() / todo.len() as f64;
         for (&i, value) in todo.iter().zip(values) {
             cache.put(units[i].stage, &units[i].key, &value.encode()?)?;
-            if verbosity() != Verbosity::Quiet {
+            if v != Verbosity::Quiet {
                 eprintln!(
                     "{}: done in {} (with its group)",
                     names[i],
@@ -284,12 +270,12 @@ fn store_group<T: Artifact>(
 
 /// The unit's artifact if the cache holds a complete entry; a damaged entry is named (it
 /// will be recomputed).
-fn lookup<T: Artifact>(cache: &Cache, name: &str, unit: &Unit) -> Result<Option<T>> {
+fn lookup<T: Artifact>(cache: &Cache, name: &str, unit: &Unit, v: Verbosity) -> Result<Option<T>> {
     match cache.get(unit.stage, &unit.key)? {
         Lookup::Hit(entry) => {
             let value = T::decode(&entry)
                 .with_context(|| format!("the cached {} in {}", unit.stage, entry.dir.display()))?;
-            if verbosity() == Verbosity::Verbose {
+            if v == Verbosity::Verbose {
                 eprintln!("{name}: cached");
             }
             Ok(Some(value))
@@ -331,14 +317,22 @@ pub struct Stages<'a> {
     pub cache: &'a Cache,
     cell: String,
     records: &'a mut Vec<StageRecord>,
+    /// What the stages print (the command line's `--quiet` / `--verbose`).
+    verbosity: Verbosity,
 }
 
 impl<'a> Stages<'a> {
-    pub fn new(cache: &'a Cache, cell: &str, records: &'a mut Vec<StageRecord>) -> Stages<'a> {
+    pub fn new(
+        cache: &'a Cache,
+        cell: &str,
+        records: &'a mut Vec<StageRecord>,
+        verbosity: Verbosity,
+    ) -> Stages<'a> {
         Stages {
             cache,
             cell: cell.to_string(),
             records,
+            verbosity,
         }
     }
 
@@ -355,7 +349,8 @@ impl<'a> Stages<'a> {
             return Ok(value);
         }
         let name = self.name(unit);
-        let (value, seconds, hit) = store(self.cache, &name, unit, || compute(self))?;
+        let (value, seconds, hit) =
+            store(self.cache, &name, unit, self.verbosity, || compute(self))?;
         self.record(unit, hit, seconds);
         Ok(value)
     }
@@ -378,10 +373,10 @@ impl<'a> Stages<'a> {
         let mut hits: Vec<bool> = found.iter().map(Option::is_some).collect();
         let missing: Vec<usize> = (0..units.len()).filter(|&i| !hits[i]).collect();
         let names: Vec<String> = units.iter().map(|u| self.name(u)).collect();
-        let cache = self.cache;
+        let (cache, v) = (self.cache, self.verbosity);
         let computed: Vec<(usize, (T, f64, bool))> = missing
             .par_iter()
-            .map(|&i| Ok((i, store(cache, &names[i], &units[i], || compute(i))?)))
+            .map(|&i| Ok((i, store(cache, &names[i], &units[i], v, || compute(i))?)))
             .collect::<Result<_>>()?;
         for (i, (value, seconds, hit)) in computed {
             found[i] = Some((value, seconds));
@@ -420,10 +415,10 @@ impl<'a> Stages<'a> {
             .filter(|g| !g.is_empty())
             .collect();
         let names: Vec<String> = units.iter().map(|u| self.name(u)).collect();
-        let cache = self.cache;
+        let (cache, v) = (self.cache, self.verbosity);
         let computed: Vec<Vec<Stored<T>>> = missing
             .par_iter()
-            .map(|members| store_group(cache, &names, units, members, &compute))
+            .map(|members| store_group(cache, &names, units, members, v, &compute))
             .collect::<Result<_>>()?;
         for (i, (value, seconds, hit)) in computed.into_iter().flatten() {
             found[i] = Some((value, seconds));
@@ -439,7 +434,7 @@ impl<'a> Stages<'a> {
     }
 
     fn lookup<T: Artifact>(&self, unit: &Unit) -> Result<Option<T>> {
-        lookup(self.cache, &self.name(unit), unit)
+        lookup(self.cache, &self.name(unit), unit, self.verbosity)
     }
 
     /// Records what a unit did (a cache hit or a computation) and how long it took.
@@ -455,7 +450,7 @@ impl<'a> Stages<'a> {
 
     /// Progress of `len` steps labelled `message`.
     pub fn bar(&self, len: u64, message: &str) -> Progress {
-        Progress::new(len, message)
+        Progress::new(len, message, self.verbosity)
     }
 
     /// How log lines name a unit: `[cell] stage key-prefix`.
@@ -492,13 +487,13 @@ mod tests {
         let mut records = Vec::new();
         // Units 1 and 4 are cached first, one at a time.
         for i in [1, 4] {
-            Stages::new(&cache, "", &mut records)
+            Stages::new(&cache, "", &mut records, Verbosity::Normal)
                 .get_or_compute(&units[i], |_| Ok(Number(10 * i as u32)))
                 .unwrap();
         }
         records.clear();
         let calls = std::sync::atomic::AtomicU32::new(0);
-        let got = Stages::new(&cache, "", &mut records)
+        let got = Stages::new(&cache, "", &mut records, Verbosity::Normal)
             .get_or_compute_each(&units, |i| {
                 calls.fetch_add(1, Ordering::Relaxed);
                 Ok(Number(10 * i as u32))
@@ -515,7 +510,7 @@ mod tests {
         let expected: Vec<&str> = units.iter().map(|u| u.key.as_str()).collect();
         assert_eq!(keys, expected);
         // A failing unit fails the call; the units that finished stay cached.
-        let err = Stages::new(&cache, "", &mut Vec::new())
+        let err = Stages::new(&cache, "", &mut Vec::new(), Verbosity::Normal)
             .get_or_compute_each(&[Unit::new("each", 1, &99, &[])], |_| -> Result<Number> {
                 anyhow::bail!("no number")
             })
@@ -534,7 +529,7 @@ mod tests {
         let unit = Unit::new("count", 1, "n = 7\n", &[]);
         let mut calls = 0;
         for _ in 0..2 {
-            let mut stages = Stages::new(&cache, "cell", &mut records);
+            let mut stages = Stages::new(&cache, "cell", &mut records, Verbosity::Normal);
             let n = stages
                 .get_or_compute(&unit, |_| {
                     calls += 1;

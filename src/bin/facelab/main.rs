@@ -8,16 +8,17 @@ mod commands;
 use std::process::ExitCode;
 
 use clap::Parser;
-use facelab::run::stage::{set_verbosity, Verbosity};
+use facelab::run::stage::Verbosity;
 
 use cli::{Cli, Command};
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    set_verbosity(match (cli.quiet, cli.verbose) {
+    // Handed to the commands that run stages; nothing else prints progress.
+    let verbosity = match (cli.quiet, cli.verbose) {
         (true, _) => Verbosity::Quiet,
         (_, true) => Verbosity::Verbose,
         _ => Verbosity::Normal,
-    });
+    };
     if let Some(path) = cli.command.anchor() {
         facelab::io::set_data_root(path.parent().unwrap_or(path));
     }
@@ -25,11 +26,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => commands::render::run(args),
         Command::Gallery(args) => commands::gallery::run(args),
         Command::Observe(args) => commands::observe::run(args),
-        Command::Run(args) => commands::run::run(args),
-        Command::Task(args) => commands::task::run(args),
+        Command::Run(args) => commands::run::run(args, verbosity),
+        Command::Task(args) => commands::task::run(args, verbosity),
         Command::Check(args) => commands::check::run(args),
         Command::Status(args) => commands::status::run(args),
-        Command::Verify(args) => commands::verify::run(args),
+        Command::Verify(args) => commands::verify::run(args, verbosity),
         Command::Transfer(args) => commands::transfer::run(args),
         Command::Edit(args) => commands::edit::run(args),
         Command::Retarget(args) => commands::retarget::run(args),

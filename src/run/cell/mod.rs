@@ -17,7 +17,7 @@ use std::rc::Rc;
 use anyhow::Result;
 
 use crate::cache::Cache;
-use crate::run::stage::{StageRecord, Stages, Unit};
+use crate::run::stage::{StageRecord, Stages, Unit, Verbosity};
 use crate::sim::basis::LinearBasis;
 use crate::sim::FaceModel;
 use crate::spec::Spec;
@@ -133,6 +133,7 @@ pub(crate) struct CellRun<'a> {
     cache: &'a Cache,
     records: &'a mut Vec<StageRecord>,
     sink: &'a mut dyn Sink,
+    verbosity: Verbosity,
     keys: Option<Rc<Keys>>,
     networks: Option<Rc<Networks>>,
     model: Option<Rc<FaceModel>>,
@@ -151,6 +152,7 @@ impl<'a> CellRun<'a> {
         records: &'a mut Vec<StageRecord>,
         sink: &'a mut dyn Sink,
         products: Box<dyn Any>,
+        verbosity: Verbosity,
     ) -> CellRun<'a> {
         CellRun {
             spec,
@@ -162,6 +164,7 @@ impl<'a> CellRun<'a> {
             cache,
             records,
             sink,
+            verbosity,
             keys: None,
             networks: None,
             model: None,
@@ -171,7 +174,7 @@ impl<'a> CellRun<'a> {
 
     /// The cell's stages: the cache, with every unit recorded for the manifest.
     pub(crate) fn stages(&mut self) -> Stages<'_> {
-        Stages::new(self.cache, self.cell, self.records)
+        Stages::new(self.cache, self.cell, self.records, self.verbosity)
     }
 
     /// The keys of the cell's basis, dataset and training stages.
@@ -184,7 +187,7 @@ impl<'a> CellRun<'a> {
     pub(crate) fn networks(&mut self) -> Result<Rc<Networks>> {
         let k = self.keys()?;
         let (spec, assets) = (self.spec, self.assets);
-        let mut stages = Stages::new(self.cache, self.cell, self.records);
+        let mut stages = Stages::new(self.cache, self.cell, self.records, self.verbosity);
         once(&mut self.networks, || {
             networks::networks(spec, assets, &k, &mut stages)
         })
@@ -205,7 +208,7 @@ impl<'a> CellRun<'a> {
     /// or inverts.
     pub(crate) fn basis(&mut self) -> Result<Rc<Option<LinearBasis>>> {
         let (k, model, spec) = (self.keys()?, self.model()?, self.spec);
-        let mut stages = Stages::new(self.cache, self.cell, self.records);
+        let mut stages = Stages::new(self.cache, self.cell, self.records, self.verbosity);
         once(&mut self.basis, || {
             networks::load_basis(&k, &mut stages, &model, spec)
         })

@@ -7,7 +7,7 @@ use facelab::spec::LauncherKind;
 use super::{data_arg, results_folder, set_threads};
 use crate::cli::RunArgs;
 
-pub fn run(args: RunArgs) -> anyhow::Result<()> {
+pub fn run(args: RunArgs, verbosity: facelab::run::stage::Verbosity) -> anyhow::Result<()> {
     let threads = set_threads(args.threads)?;
     let spec = data_arg(args.spec.spec);
     let given = args.launcher.as_deref().and_then(LauncherKind::parse);
@@ -18,6 +18,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         publish: args.publish,
         assemble: args.assemble,
         registry: REGISTRY,
+        verbosity,
     };
     let kind = run::launcher_of(&spec, &opts.sets, given)?;
     if kind == LauncherKind::Slurm && opts.assemble.is_none() {

@@ -6,8 +6,8 @@ use facelab::run;
 use super::set_threads;
 use crate::cli::TaskArgs;
 
-pub fn run(args: TaskArgs) -> anyhow::Result<()> {
+pub fn run(args: TaskArgs, verbosity: facelab::run::stage::Verbosity) -> anyhow::Result<()> {
     set_threads(None)?;
-    run::task(&args.launch, &args.array, args.index, REGISTRY)?;
+    run::task(&args.launch, &args.array, args.index, REGISTRY, verbosity)?;
     Ok(())
 }

@@ -5,9 +5,9 @@ use facelab::experiments::REGISTRY;
 use super::set_threads;
 use crate::cli::VerifyArgs;
 
-pub fn run(args: VerifyArgs) -> anyhow::Result<()> {
+pub fn run(args: VerifyArgs, verbosity: facelab::run::stage::Verbosity) -> anyhow::Result<()> {
     let threads = set_threads(args.threads)?;
-    let differ = facelab::run::verify(&args.run_dir, threads, REGISTRY)?;
+    let differ = facelab::run::verify(&args.run_dir, threads, REGISTRY, verbosity)?;
     if differ.is_empty() {
         println!(
             "{}: every CSV reproduced byte for byte",
