@@ -402,6 +402,22 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
     })
 }
 
+/// The decimals OpenFace writes, which `write_openface` writes and `OpenFaceFile::from_rows`
+/// rounds to.
+const AU_DECIMALS: usize = 2;
+const TIMESTAMP_DECIMALS: usize = 3;
+const CONFIDENCE_DECIMALS: usize = 2;
+const LANDMARK_DECIMALS: usize = 1;
+
+/// The decimals of pose column `k` (`pose_columns` order): translation 1, rotation 3.
+fn pose_decimals(k: usize) -> usize {
+    if k < 3 {
+        1
+    } else {
+        3
+    }
+}
+
 impl OpenFaceFile {
     /// Frames made in memory (the landmarker's rows) as a reader of their written file
     /// (`write_openface`) sees them, without writing it: every value at OpenFace's decimals,
@@ -442,24 +458,24 @@ impl OpenFaceFile {
                 line: i + 2,
                 frame: r.frame,
                 face_id: Some(r.face_id.unwrap_or(0)),
-                timestamp: Some(at(r.timestamp.unwrap_or(0.0), 3)),
-                confidence: at(r.confidence, 2),
+                timestamp: Some(at(r.timestamp.unwrap_or(0.0), TIMESTAMP_DECIMALS)),
+                confidence: at(r.confidence, CONFIDENCE_DECIMALS),
                 success: true,
-                aus: r.aus.map(|v| at(v, 2)),
+                aus: r.aus.map(|v| at(v, AU_DECIMALS)),
                 pose: r
                     .pose
                     .filter(|_| pose)
-                    .map(|p| std::array::from_fn(|k| at(p[k], if k < 3 { 1 } else { 3 }))),
+                    .map(|p| std::array::from_fn(|k| at(p[k], pose_decimals(k)))),
                 landmarks_2d: r
                     .landmarks_2d
                     .as_ref()
                     .filter(|_| landmarks_2d)
-                    .map(|l| Box::new(l.map(|p| p.map(|v| at(v, 1))))),
+                    .map(|l| Box::new(l.map(|p| p.map(|v| at(v, LANDMARK_DECIMALS))))),
                 landmarks_3d: r
                     .landmarks_3d
                     .as_ref()
                     .filter(|_| landmarks_3d)
-                    .map(|l| Box::new(l.map(|p| p.map(|v| at(v, 1))))),
+                    .map(|l| Box::new(l.map(|p| p.map(|v| at(v, LANDMARK_DECIMALS))))),
             })
             .collect();
         OpenFaceFile {
@@ -499,13 +515,15 @@ pub fn openface_bytes(rows: &[FaceRow]) -> anyhow::Result<Vec<u8>> {
     text("frame", &|r| r.frame.to_string());
     text("face_id", &|r| r.face_id.unwrap_or(0).to_string());
     text("timestamp", &|r| {
-        format!("{:.3}", r.timestamp.unwrap_or(0.0))
+        format!("{:.*}", TIMESTAMP_DECIMALS, r.timestamp.unwrap_or(0.0))
     });
-    text("confidence", &|r| format!("{:.2}", r.confidence));
+    text("confidence", &|r| {
+        format!("{:.*}", CONFIDENCE_DECIMALS, r.confidence)
+    });
     text("success", &|r| u8::from(r.success).to_string());
     if !rows.is_empty() && rows.iter().all(|r| r.pose.is_some()) {
         for (k, name) in pose_columns().iter().enumerate() {
-            let decimals = if k < 3 { 1 } else { 3 };
+            let decimals = pose_decimals(k);
             text(name, &|r| {
                 format!("{:.*}", decimals, r.pose.expect("checked")[k])
             });
@@ -515,7 +533,11 @@ pub fn openface_bytes(rows: &[FaceRow]) -> anyhow::Result<Vec<u8>> {
         for (axis, name) in ["x", "y"].iter().enumerate() {
             for i in 0..LANDMARK_COUNT {
                 text(&format!("{name}_{i}"), &|r| {
-                    format!("{:.1}", r.landmarks_2d.as_ref().expect("checked")[i][axis])
+                    format!(
+                        "{:.*}",
+                        LANDMARK_DECIMALS,
+                        r.landmarks_2d.as_ref().expect("checked")[i][axis]
+                    )
                 });
             }
         }
@@ -524,13 +546,17 @@ pub fn openface_bytes(rows: &[FaceRow]) -> anyhow::Result<Vec<u8>> {
         for (axis, name) in ["X", "Y", "Z"].iter().enumerate() {
             for i in 0..LANDMARK_COUNT {
                 text(&format!("{name}_{i}"), &|r| {
-                    format!("{:.1}", r.landmarks_3d.as_ref().expect("checked")[i][axis])
+                    format!(
+                        "{:.*}",
+                        LANDMARK_DECIMALS,
+                        r.landmarks_3d.as_ref().expect("checked")[i][axis]
+                    )
                 });
             }
         }
     }
     for k in 0..AU_COUNT {
-        text(&au_column(k), &|r| format!("{:.2}", r.aus[k]));
+        text(&au_column(k), &|r| format!("{:.*}", AU_DECIMALS, r.aus[k]));
     }
     let mut df = DataFrame::new(rows.len(), cols)?;
     let mut out = Vec::new();

@@ -14,7 +14,7 @@
 use candle_core::{DType, Device, Tensor, Var, D};
 use candle_nn::optim::{AdamW, Optimizer, ParamsAdamW};
 
-use super::mlp::{Curves, LearnError, Mlp, Normalizer, Pairs};
+use super::mlp::{mse_of, Curves, LearnError, Mlp, Normalizer, Pairs};
 use super::params::{ModelParams, TrainParams};
 
 /// One network's part of a batched training: its pairs and its uniform source.
@@ -234,28 +234,18 @@ fn forward(layers: &[(Var, Var)], x: &Tensor) -> candle_core::Result<Tensor> {
     Ok(h)
 }
 
-/// `Mlp::mse` of predictions `p` against `y`.
+/// `Mlp::mse` of predictions `p` against `y` (0 for none, as `Mlp::mse` of no pairs).
 fn mse(p: &[f32], y: &[f32]) -> f64 {
     if p.is_empty() {
         return 0.0;
     }
-    let d: Vec<f64> = p.iter().zip(y).map(|(a, b)| (a - b) as f64).collect();
-    crate::stats::mean_square(&d)
+    mse_of(p, y)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn uniform_from(seed: u64) -> impl FnMut() -> f64 {
-        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
-        move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
+    use crate::learn::mlp::tests::uniform_from;
 
     fn data(n: usize, seed: u64) -> Pairs {
         let mut u = uniform_from(seed);

@@ -195,13 +195,7 @@ impl Mlp {
         if pairs.is_empty() {
             return Ok(0.0);
         }
-        let p = self.predict(&pairs.x)?;
-        let d: Vec<f64> = p
-            .iter()
-            .zip(&pairs.y)
-            .map(|(a, b)| (a - b) as f64)
-            .collect();
-        Ok(crate::stats::mean_square(&d))
+        Ok(mse_of(&self.predict(&pairs.x)?, &pairs.y))
     }
 
     /// Weights and normalization as safetensors bytes (names sorted, no metadata).
@@ -255,6 +249,12 @@ impl Mlp {
             outputs,
         })
     }
+}
+
+/// The mean squared error of predictions `p` against targets `y` (row-major, alike), in f64.
+pub(super) fn mse_of(p: &[f32], y: &[f32]) -> f64 {
+    let d: Vec<f64> = p.iter().zip(y).map(|(a, b)| (a - b) as f64).collect();
+    crate::stats::mean_square(&d)
 }
 
 /// Train and test MSE after each epoch.
@@ -341,10 +341,11 @@ pub fn train(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
-    fn uniform_from(seed: u64) -> impl FnMut() -> f64 {
+    /// A seeded U[0, 1) source for the learning tests (a linear congruential generator).
+    pub(in crate::learn) fn uniform_from(seed: u64) -> impl FnMut() -> f64 {
         let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
         move || {
             s = s

@@ -186,38 +186,27 @@ fn store<T: Artifact>(
     v: Verbosity,
     compute: impl FnOnce() -> Result<T>,
 ) -> Result<(T, f64, bool)> {
-    let t = Instant::now();
-    let _lock = cache.lock(unit.stage, &unit.key, &mut |owner| {
-        eprintln!("{name}: another run ({owner}) is computing it; waiting");
+    let names = [name.to_string()];
+    let mut one = store_group(cache, &names, std::slice::from_ref(unit), &[0], v, |_| {
+        Ok(vec![compute()?])
     })?;
-    if let Some(value) = lookup(cache, name, unit, v)? {
-        return Ok((value, t.elapsed().as_secs_f64(), true));
-    }
-    if v != Verbosity::Quiet {
-        eprintln!("{name}: computing");
-    }
-    let value = compute()?;
-    cache.put(unit.stage, &unit.key, &value.encode()?)?;
-    let seconds = t.elapsed().as_secs_f64();
-    if v != Verbosity::Quiet {
-        eprintln!("{name}: done in {}", duration(seconds));
-    }
-    Ok((value, seconds, false))
+    Ok(one.remove(0).1)
 }
 
 /// A unit of a group, stored: its index, its artifact, its seconds and whether another run
 /// had stored it.
 type Stored<T> = (usize, (T, f64, bool));
 
-/// `store` for a group of units computed by one call: each locked, those another run stored
-/// meanwhile read back, the rest computed together and stored one by one.
+/// `store` for a group of units computed by one call (`store` is this for one unit): each
+/// locked, those another run stored meanwhile read back, the rest computed together and
+/// stored one by one.
 fn store_group<T: Artifact>(
     cache: &Cache,
     names: &[String],
     units: &[Unit],
     members: &[usize],
     v: Verbosity,
-    compute: &impl Fn(&[usize]) -> Result<Vec<T>>,
+    compute: impl FnOnce(&[usize]) -> Result<Vec<T>>,
 ) -> Result<Vec<Stored<T>>> {
     let t = Instant::now();
     let mut locks = Vec::with_capacity(members.len());
@@ -255,11 +244,12 @@ fn store_group<T: Artifact>(
         for (&i, value) in todo.iter().zip(values) {
             cache.put(units[i].stage, &units[i].key, &value.encode()?)?;
             if v != Verbosity::Quiet {
-                eprintln!(
-                    "{}: done in {} (with its group)",
-                    names[i],
-                    duration(seconds)
-                );
+                let shared = if todo.len() > 1 {
+                    " (with its group)"
+                } else {
+                    ""
+                };
+                eprintln!("{}: done in {}{shared}", names[i], duration(seconds));
             }
             out.push((i, (value, seconds, false)));
         }
@@ -364,34 +354,14 @@ impl<'a> Stages<'a> {
         units: &[Unit],
         compute: impl Fn(usize) -> Result<T> + Sync,
     ) -> Result<Vec<T>> {
-        use rayon::prelude::*;
-        let mut found: Vec<Option<(T, f64)>> = Vec::with_capacity(units.len());
-        for unit in units {
-            let t = Instant::now();
-            found.push(self.lookup(unit)?.map(|v| (v, t.elapsed().as_secs_f64())));
-        }
-        let mut hits: Vec<bool> = found.iter().map(Option::is_some).collect();
-        let missing: Vec<usize> = (0..units.len()).filter(|&i| !hits[i]).collect();
-        let names: Vec<String> = units.iter().map(|u| self.name(u)).collect();
-        let (cache, v) = (self.cache, self.verbosity);
-        let computed: Vec<(usize, (T, f64, bool))> = missing
-            .par_iter()
-            .map(|&i| Ok((i, store(cache, &names[i], &units[i], v, || compute(i))?)))
-            .collect::<Result<_>>()?;
-        for (i, (value, seconds, hit)) in computed {
-            found[i] = Some((value, seconds));
-            hits[i] = hit;
-        }
-        let mut out = Vec::with_capacity(units.len());
-        for ((unit, hit), slot) in units.iter().zip(hits).zip(found) {
-            let (value, seconds) = slot.context("every missing unit is computed")?;
-            self.record(unit, hit, seconds);
-            out.push(value);
-        }
-        Ok(out)
+        let alone: Vec<Vec<usize>> = (0..units.len()).map(|i| vec![i]).collect();
+        self.get_or_compute_groups(units, &alone, |members| {
+            members.iter().map(|&i| compute(i)).collect()
+        })
     }
 
-    /// Like [`Stages::get_or_compute_each`], for units computed best together: each group's
+    /// Like [`Stages::get_or_compute_each`] (which is this with groups of one), for units
+    /// computed best together: each group's
     /// missing units go to one `compute(members)` call (the groups in parallel), which returns
     /// their artifacts in the members' order; each is stored under its own unit, so what a
     /// unit's artifact is may not depend on which units share its call. Every unit of a group
