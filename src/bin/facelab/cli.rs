@@ -425,7 +425,7 @@ pub enum Bench {
         /// Clip length at 24 fps
         #[arg(long, default_value_t = 20.0)]
         seconds: f64,
-        /// Threads for the clip [default: 1]
+        /// Threads for the clip
         #[arg(long, default_value_t = 1)]
         threads: usize,
     },
@@ -494,6 +494,21 @@ impl Command {
             Command::Status(a) => Some(&a.spec.spec),
             Command::Verify(a) => Some(&a.run_dir),
             Command::Transfer(a) => Some(&a.model),
+            _ => None,
+        }
+    }
+
+    /// The worker threads the command asked for (`--threads`, or the one core a benchmark
+    /// measures on); `None` leaves the choice to [`crate::commands::set_threads`].
+    pub fn threads(&self) -> Option<usize> {
+        match self {
+            Command::Run(a) => a.threads,
+            Command::Verify(a) => a.threads,
+            Command::Bench { what } => match what {
+                Bench::Landmark { threads, .. } | Bench::Train { threads, .. } => Some(*threads),
+                Bench::Transfer { .. } | Bench::Neck { .. } => Some(1),
+                Bench::Observe { .. } | Bench::Solve { .. } => None,
+            },
             _ => None,
         }
     }

@@ -1,5 +1,5 @@
 //! The `facelab` command line: parse the arguments, set what every command shares (verbosity,
-//! the checkout the data files come from), dispatch to the command's file in `commands/`,
+//! the thread counts, the checkout the data files come from), dispatch to the command's file in `commands/`,
 //! print the error chain and exit non-zero on failure.
 
 mod cli;
@@ -19,6 +19,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         (_, true) => Verbosity::Verbose,
         _ => Verbosity::Normal,
     };
+    let threads = commands::set_threads(cli.command.threads())?;
     if let Some(path) = cli.command.anchor() {
         facelab::io::set_data_root(path.parent().unwrap_or(path));
     }
@@ -26,11 +27,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => commands::render::run(args),
         Command::Gallery(args) => commands::gallery::run(args),
         Command::Observe(args) => commands::observe::run(args),
-        Command::Run(args) => commands::run::run(args, verbosity),
+        Command::Run(args) => commands::run::run(args, threads, verbosity),
         Command::Task(args) => commands::task::run(args, verbosity),
         Command::Check(args) => commands::check::run(args),
         Command::Status(args) => commands::status::run(args),
-        Command::Verify(args) => commands::verify::run(args, verbosity),
+        Command::Verify(args) => commands::verify::run(args, threads, verbosity),
         Command::Transfer(args) => commands::transfer::run(args),
         Command::Edit(args) => commands::edit::run(args),
         Command::Retarget(args) => commands::retarget::run(args),

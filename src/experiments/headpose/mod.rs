@@ -283,12 +283,8 @@ pub fn stage(spec: &crate::spec::Spec, stages: &mut Stages) -> Result<Output> {
     let Trained { mlp, curves } = stages.get_or_compute(&training, |_| {
         let mut rng = stream(p.seed, "headpose/network");
         let mut uniform = || rng.uniform();
-        // One candle thread: this small network trains twice as fast on one core as on two
-        // (`bench train`), with the same bytes.
-        let (mlp, curves) = crate::learn::one_thread_each(|| {
-            train(&train_pairs, &test_pairs, &p.model, &p.train, &mut uniform)
-        })
-        .context("training the voluntary controller")?;
+        let (mlp, curves) = train(&train_pairs, &test_pairs, &p.model, &p.train, &mut uniform)
+            .context("training the voluntary controller")?;
         Ok(Trained { mlp, curves })
     })?;
 

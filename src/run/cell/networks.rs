@@ -286,8 +286,9 @@ pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -
     };
 
     // Training: every (seed, network).
-    // The networks are independent: the missing ones train in parallel, one candle thread
-    // each (a small MLP trains fastest on one thread), with the same bytes as one by one.
+    // The networks are independent: the missing ones train in parallel, each candle operation
+    // on one thread as the command line sets it (a small MLP trains fastest on one thread),
+    // with the same bytes as one by one.
     let progress = stages.bar(k.train.len() as u64, "train");
     let units: Vec<Unit> = k
         .train
@@ -305,49 +306,47 @@ pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -
             groups.push(members);
         }
     }
-    let trained = learn::one_thread_each(|| {
-        stages.get_or_compute_groups(&units, &groups, |members| {
-            let sets: Vec<(Pairs, Pairs)> = members
-                .iter()
-                .map(|&i| {
-                    let (seed, network) = k.train[i].0;
-                    let split = split(&samples, spec.dataset.test_fraction, seed);
-                    network_pairs(network, &samples, &split, &a.facs)
-                })
-                .collect();
-            let mut streams: Vec<_> = members
-                .iter()
-                .map(|&i| {
-                    let (seed, network) = k.train[i].0;
-                    stream(seed, &format!("train/{}", network.name()))
-                })
-                .collect();
-            let mut sources: Vec<_> = streams.iter_mut().map(|r| move || r.uniform()).collect();
-            let mut jobs: Vec<learn::Job> = sets
-                .iter()
-                .zip(sources.iter_mut())
-                .map(|((train, test), uniform)| learn::Job {
-                    train,
-                    test,
-                    uniform,
-                })
-                .collect();
-            let trained = learn::train_batch(&mut jobs, &spec.model, &spec.train).map_err(|e| {
-                let what = match e.index {
-                    Some(i) => {
-                        let (seed, network) = k.train[members[i]].0;
-                        format!("training the {} network, seed {seed}", network.name())
-                    }
-                    None => format!("training the {} networks", k.train[members[0]].0 .1.name()),
-                };
-                anyhow::Error::new(e.error).context(what)
-            })?;
-            progress.inc(members.len() as u64);
-            Ok(trained
-                .into_iter()
-                .map(|(mlp, curves)| Trained { mlp, curves })
-                .collect())
-        })
+    let trained = stages.get_or_compute_groups(&units, &groups, |members| {
+        let sets: Vec<(Pairs, Pairs)> = members
+            .iter()
+            .map(|&i| {
+                let (seed, network) = k.train[i].0;
+                let split = split(&samples, spec.dataset.test_fraction, seed);
+                network_pairs(network, &samples, &split, &a.facs)
+            })
+            .collect();
+        let mut streams: Vec<_> = members
+            .iter()
+            .map(|&i| {
+                let (seed, network) = k.train[i].0;
+                stream(seed, &format!("train/{}", network.name()))
+            })
+            .collect();
+        let mut sources: Vec<_> = streams.iter_mut().map(|r| move || r.uniform()).collect();
+        let mut jobs: Vec<learn::Job> = sets
+            .iter()
+            .zip(sources.iter_mut())
+            .map(|((train, test), uniform)| learn::Job {
+                train,
+                test,
+                uniform,
+            })
+            .collect();
+        let trained = learn::train_batch(&mut jobs, &spec.model, &spec.train).map_err(|e| {
+            let what = match e.index {
+                Some(i) => {
+                    let (seed, network) = k.train[members[i]].0;
+                    format!("training the {} network, seed {seed}", network.name())
+                }
+                None => format!("training the {} networks", k.train[members[0]].0 .1.name()),
+            };
+            anyhow::Error::new(e.error).context(what)
+        })?;
+        progress.inc(members.len() as u64);
+        Ok(trained
+            .into_iter()
+            .map(|(mlp, curves)| Trained { mlp, curves })
+            .collect())
     })?;
     progress.finish_and_clear();
     let mut nets: BTreeMap<(u64, Network), Mlp> = BTreeMap::new();

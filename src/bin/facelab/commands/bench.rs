@@ -6,37 +6,23 @@ use facelab::tools::bench::{
     bench_landmark, bench_neck, bench_observe, bench_solve, bench_train, bench_transfer,
 };
 
-use super::set_threads;
 use crate::cli::Bench;
 
 pub fn run(what: Bench) -> anyhow::Result<()> {
     let out = &mut std::io::stdout().lock();
     match what {
+        // The thread counts were set by main from each benchmark's own (`Command::threads`).
         Bench::Landmark {
-            frames,
-            seconds,
-            threads,
-        } => {
-            set_threads(Some(threads))?;
-            bench_landmark(frames, seconds, out)
-        }
+            frames, seconds, ..
+        } => bench_landmark(frames, seconds, out),
         Bench::Train {
             pairs,
             epochs,
             export,
-            threads,
-        } => {
-            set_threads(Some(threads))?;
-            bench_train(pairs, epochs, export.as_deref(), out)
-        }
-        Bench::Transfer { model, clips } => {
-            set_threads(Some(1))?;
-            bench_transfer(&model, clips, out)
-        }
-        Bench::Neck { seconds } => {
-            set_threads(Some(1))?;
-            bench_neck(seconds, out)
-        }
+            ..
+        } => bench_train(pairs, epochs, export.as_deref(), out),
+        Bench::Transfer { model, clips } => bench_transfer(&model, clips, out),
+        Bench::Neck { seconds } => bench_neck(seconds, out),
         Bench::Observe { frames } => bench_observe(frames, out),
         Bench::Solve {
             face,

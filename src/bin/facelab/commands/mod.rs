@@ -21,22 +21,35 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use facelab::transfer::pictures::{LandmarkOutput, PhotoNeutral};
 
-/// Sets the worker count for rayon and for candle (which reads `RAYON_NUM_THREADS` on every
-/// matrix product when it is unset, at a cost). Returns the count used.
+/// Sets the thread counts, once, before any command runs: rayon's pool gets `threads` workers
+/// (else the Slurm task's cores, else `RAYON_NUM_THREADS` as the caller set it, else all
+/// cores), and candle runs each operation on one thread. candle sizes its matrix products by `RAYON_NUM_THREADS`, which it reads at every
+/// product; facelab runs its parallel work (frames, faces, seeds) on rayon's workers, and a
+/// small network trains fastest on one thread (`bench train`), so the variable is set to 1
+/// here and never changed after. The bytes of every result do not depend on either count.
+/// Returns the worker count.
 pub fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
-    // Inside a Slurm allocation, "all cores" are the task's.
-    let allocated = std::env::var("SLURM_CPUS_PER_TASK")
-        .ok()
-        .and_then(|v| v.parse::<usize>().ok());
-    let n = threads.or(allocated).unwrap_or_else(|| {
-        std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(1)
-    });
+    let from = |var: &str| {
+        std::env::var(var)
+            .ok()
+            .and_then(|v| v.parse::<usize>().ok())
+            .filter(|&n| n > 0)
+    };
+    // Inside a Slurm allocation, "all cores" are the task's (a task inherits the submitting
+    // process's environment, where the variable below is already 1).
+    let n = threads
+        .or_else(|| from("SLURM_CPUS_PER_TASK"))
+        .or_else(|| from("RAYON_NUM_THREADS"))
+        .unwrap_or_else(|| {
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1)
+        });
     if n == 0 {
         anyhow::bail!("--threads must be at least 1");
     }
-    std::env::set_var("RAYON_NUM_THREADS", n.to_string());
+    // Before any thread starts: main calls this first.
+    std::env::set_var("RAYON_NUM_THREADS", "1");
     rayon::ThreadPoolBuilder::new()
         .num_threads(n)
         .build_global()

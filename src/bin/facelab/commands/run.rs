@@ -4,11 +4,14 @@ use facelab::experiments::REGISTRY;
 use facelab::run;
 use facelab::spec::LauncherKind;
 
-use super::{data_arg, results_folder, set_threads};
+use super::{data_arg, results_folder};
 use crate::cli::RunArgs;
 
-pub fn run(args: RunArgs, verbosity: facelab::run::stage::Verbosity) -> anyhow::Result<()> {
-    let threads = set_threads(args.threads)?;
+pub fn run(
+    args: RunArgs,
+    threads: usize,
+    verbosity: facelab::run::stage::Verbosity,
+) -> anyhow::Result<()> {
     let spec = data_arg(args.spec.spec);
     let given = args.launcher.as_deref().and_then(LauncherKind::parse);
     let opts = run::RunOptions {

@@ -3,11 +3,9 @@
 use facelab::experiments::REGISTRY;
 use facelab::run;
 
-use super::set_threads;
 use crate::cli::TaskArgs;
 
 pub fn run(args: TaskArgs, verbosity: facelab::run::stage::Verbosity) -> anyhow::Result<()> {
-    set_threads(None)?;
     run::task(&args.launch, &args.array, args.index, REGISTRY, verbosity)?;
     Ok(())
 }

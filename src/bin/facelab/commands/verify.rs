@@ -2,11 +2,13 @@
 
 use facelab::experiments::REGISTRY;
 
-use super::set_threads;
 use crate::cli::VerifyArgs;
 
-pub fn run(args: VerifyArgs, verbosity: facelab::run::stage::Verbosity) -> anyhow::Result<()> {
-    let threads = set_threads(args.threads)?;
+pub fn run(
+    args: VerifyArgs,
+    threads: usize,
+    verbosity: facelab::run::stage::Verbosity,
+) -> anyhow::Result<()> {
     let differ = facelab::run::verify(&args.run_dir, threads, REGISTRY, verbosity)?;
     if differ.is_empty() {
         println!(
