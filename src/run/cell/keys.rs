@@ -1,7 +1,8 @@
 //! The inputs a run's stages share (asset and data files by content) and the cache keys of
-//! a cell's basis, dataset and training stages.
+//! a cell's basis and dataset stages; its training keys are made where its networks are
+//! defined (`networks::train_keys`).
 
-use super::networks::Network;
+use super::networks::{train_keys, Network};
 use crate::cache;
 use crate::dataset::reader::Source;
 use crate::dataset::{DatasetParams, Family, SolveStart};
@@ -9,7 +10,6 @@ use crate::io::expressions::default_expressions_path;
 use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
 use crate::io::mesh::default_mesh_path;
 use crate::io::observer_fit::read_any_calibration;
-use crate::learn::params::{ModelParams, TrainParams};
 use crate::observe::Calibration;
 use crate::observe::ObserverNoise;
 use crate::run::stage::Unit;
@@ -18,7 +18,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use std::path::Path;
 
-use super::{BASIS_VERSION, DATASET_VERSION, TRAIN_VERSION};
+use super::{BASIS_VERSION, DATASET_VERSION};
 
 /// The face settings every solve reads: the basis, the dataset and the cohorts hash them.
 #[derive(Serialize)]
@@ -52,17 +52,6 @@ struct DatasetInputs<'a> {
     observer: ObserverNoise,
     calibration: &'a str,
     source: Source,
-}
-
-/// What one network's training depends on (besides the dataset's key).
-#[derive(Serialize)]
-struct TrainInputs<'a> {
-    facs: &'a str,
-    seed: u64,
-    network: String,
-    model: &'a ModelParams,
-    train: &'a TrainParams,
-    test_fraction: f64,
 }
 
 pub(crate) fn file_hash(path: &Path) -> Result<String> {
@@ -170,21 +159,7 @@ pub(crate) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
     };
     let dataset = dataset_key(spec.observer);
     let clean_dataset = (!spec.observer.is_off()).then(|| dataset_key(ObserverNoise::default()));
-    let mut train = Vec::new();
-    for &seed in &spec.seeds {
-        for network in Network::all() {
-            let inputs = TrainInputs {
-                facs: &a.facs_hash,
-                seed,
-                network: network.name(),
-                model: &spec.model,
-                train: &spec.train,
-                test_fraction: spec.dataset.test_fraction,
-            };
-            let unit = Unit::new("train", TRAIN_VERSION, &inputs, &[&dataset]);
-            train.push(((seed, network), unit.key));
-        }
-    }
+    let train = train_keys(spec, &a.facs_hash, &dataset);
     Ok(Keys {
         basis,
         dataset,

@@ -23,7 +23,39 @@ use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 
 use super::keys::{spec_calibration, Assets, Keys};
-use super::DATASET_VERSION;
+use super::{DATASET_VERSION, TRAIN_VERSION};
+
+/// What one network's training depends on (besides the dataset's key).
+#[derive(serde::Serialize)]
+struct TrainInputs<'a> {
+    facs: &'a str,
+    seed: u64,
+    network: String,
+    model: &'a learn::ModelParams,
+    train: &'a learn::TrainParams,
+    test_fraction: f64,
+}
+
+/// Each (seed, network)'s training key, in seed then `Network::all()` order: the FACS tables'
+/// hash, the network, the model and training settings and the split, over the dataset's key.
+pub(crate) fn train_keys(spec: &Spec, facs: &str, dataset: &str) -> Vec<((u64, Network), String)> {
+    let mut train = Vec::new();
+    for &seed in &spec.seeds {
+        for network in Network::all() {
+            let inputs = TrainInputs {
+                facs,
+                seed,
+                network: network.name(),
+                model: &spec.model,
+                train: &spec.train,
+                test_fraction: spec.dataset.test_fraction,
+            };
+            let unit = Unit::new("train", TRAIN_VERSION, &inputs, &[dataset]);
+            train.push(((seed, network), unit.key));
+        }
+    }
+    train
+}
 
 pub(crate) fn basis_bytes(b: &LinearBasis) -> Vec<u8> {
     let mut out = Vec::new();
