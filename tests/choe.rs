@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use facelab::invert::{accelerated, projected_gradient, projected_newton, Bound, BoxQp};
-use facelab::io::calibration::{default_calibration_path, read_calibration};
+use facelab::io::calibration::read_calibration;
 use facelab::observe::landmarks;
 use facelab::sim::basis::LinearBasis;
 use facelab::sim::controls::{JAW_ROTATION, MUSCLE_COUNT};
@@ -18,7 +18,7 @@ fn basis() -> &'static LinearBasis {
 }
 
 fn inverter() -> Inverter<'static> {
-    let calibration = read_calibration(&default_calibration_path())
+    let calibration = read_calibration(&facelab::io::Layout::here().calibration())
         .unwrap()
         .calibration();
     Inverter::new(crate::model(), basis(), &calibration).unwrap()
@@ -26,7 +26,9 @@ fn inverter() -> Inverter<'static> {
 
 /// Joy at s = 0.7 with the jaw a little open: the variables (52 muscles, jaw rotation).
 fn known() -> (Activations, Vec<f64>) {
-    let weights = facelab::io::face::FaceSource::default().weights().unwrap();
+    let weights = facelab::io::face::FaceSource::of(&facelab::io::Layout::here())
+        .weights()
+        .unwrap();
     let a = weights.sample(facelab::sim::expression::Expression::Joy, 0.7, 0.2);
     let x = (0..MUSCLE_COUNT)
         .chain([JAW_ROTATION])
@@ -197,7 +199,9 @@ fn a_predicted_solve_reaches_the_equilibrium_of_the_solve_from_rest() {
     use facelab::sim::geom::{norm, sub};
     use facelab::sim::solver::solve_predicted;
     let model = crate::model();
-    let weights = facelab::io::face::FaceSource::default().weights().unwrap();
+    let weights = facelab::io::face::FaceSource::of(&facelab::io::Layout::here())
+        .weights()
+        .unwrap();
     let mut ws = Workspace::new(model).unwrap();
     let params = SolveParams::default();
     let n = model.vertex_count();
@@ -239,7 +243,9 @@ fn a_predicted_solve_reaches_the_equilibrium_of_the_solve_from_rest() {
 #[test]
 fn correcting_the_landmark_fit_through_the_face_brings_its_landmarks_closer() {
     let inv = inverter();
-    let weights = facelab::io::face::FaceSource::default().weights().unwrap();
+    let weights = facelab::io::face::FaceSource::of(&facelab::io::Layout::here())
+        .weights()
+        .unwrap();
     let a = weights.sample(facelab::sim::expression::Expression::Joy, 1.0, 0.4);
     let params = SolveParams::default();
     let mut ws = Workspace::new(crate::model()).unwrap();

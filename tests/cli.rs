@@ -145,13 +145,13 @@ fn render_writes_a_png() {
 /// An OpenFace-style file with 3D landmarks (mm, camera frame) of the model's rest face and
 /// its joy face, and AU columns as OpenFace would write them.
 fn landmark_file(path: &std::path::Path) {
-    use facelab::io::expressions::{default_expressions_path, read_expressions};
+    use facelab::io::expressions::read_expressions;
     use facelab::observe::{landmarks, AU_NAMES};
     use facelab::sim::expression::Expression;
     use facelab::sim::{solve_from_rest, SolveParams, Workspace};
 
     let m = super::model();
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     let mut ws = Workspace::new(m).unwrap();
     let (joy, _) = solve_from_rest(
         m,

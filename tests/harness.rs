@@ -34,7 +34,7 @@ fn spec_error(text: &str, sets: &[&str]) -> String {
     let path = dir.join("s.toml");
     std::fs::write(&path, text).unwrap();
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    match spec::load(&path, &sets) {
+    match spec::load(&facelab::io::Layout::here(), &path, &sets) {
         Ok(_) => panic!("spec should fail:\n{text}"),
         Err(e) => e.to_string(),
     }
@@ -114,7 +114,7 @@ fn spec_errors_name_file_line_column_and_key() {
     let dir = temp("cycle");
     std::fs::write(dir.join("a.toml"), "extends = \"b.toml\"\n").unwrap();
     std::fs::write(dir.join("b.toml"), "extends = \"a.toml\"\n").unwrap();
-    let e = spec::load(&dir.join("a.toml"), &[]).unwrap_err();
+    let e = spec::load(&facelab::io::Layout::here(), &dir.join("a.toml"), &[]).unwrap_err();
     assert!(matches!(e, SpecError::Cycle(_)), "{e}");
     // Named as they are given, relative to the working folder, with each `extends` line.
     let out = Command::new(env!("CARGO_BIN_EXE_facelab"))
@@ -131,7 +131,7 @@ fn spec_errors_name_file_line_column_and_key() {
     );
     // An empty spec is an error, not a full default run.
     std::fs::write(dir.join("empty.toml"), "# nothing here\n\n").unwrap();
-    let e = spec::load(&dir.join("empty.toml"), &[]).unwrap_err();
+    let e = spec::load(&facelab::io::Layout::here(), &dir.join("empty.toml"), &[]).unwrap_err();
     assert!(
         matches!(e, SpecError::Empty { .. }) && e.to_string().contains("empty.toml"),
         "{e}"
@@ -152,29 +152,56 @@ fn spec_errors_name_file_line_column_and_key() {
 #[test]
 fn later_keys_change_nothing_for_specs_that_do_not_set_them() {
     for name in ["paper", "table1", "smoke"] {
-        let cells = spec::load(&root().join(format!("experiments/{name}.toml")), &[]).unwrap();
+        let cells = spec::load(
+            &facelab::io::Layout::here(),
+            &root().join(format!("experiments/{name}.toml")),
+            &[],
+        )
+        .unwrap();
         for later in ["dataset.family", "realfaces."] {
             assert!(!cells[0].spec.records(later), "{name}.toml records {later}");
         }
     }
     // The smoke spec sets none of the later keys; the paper's specs read every face with the
     // readout fitted to OpenFace, and Table 2 adds the committed real file.
-    let smoke = &spec::load(&root().join("experiments/smoke.toml"), &[]).unwrap()[0].spec;
+    let smoke = &spec::load(
+        &facelab::io::Layout::here(),
+        &root().join("experiments/smoke.toml"),
+        &[],
+    )
+    .unwrap()[0]
+        .spec;
     assert!(!smoke.records("observer.calibration"));
     assert!(!smoke.records("table2.openface"));
     assert_eq!(smoke.table2_openface, None);
-    let paper = &spec::load(&root().join("experiments/paper.toml"), &[]).unwrap()[0].spec;
+    let paper = &spec::load(
+        &facelab::io::Layout::here(),
+        &root().join("experiments/paper.toml"),
+        &[],
+    )
+    .unwrap()[0]
+        .spec;
     assert_eq!(paper.calibration, "experiments/au_observer_fit.csv");
     assert_eq!(
-        paper.table2_openface.as_deref(),
+        paper.table2_openface.as_ref().map(|f| f.name.as_str()),
         Some("assets/openface/py-feat/OpenFace_Test.csv")
     );
-    let cells = spec::load(&root().join("experiments/realfaces.toml"), &[]).unwrap();
+    let cells = spec::load(
+        &facelab::io::Layout::here(),
+        &root().join("experiments/realfaces.toml"),
+        &[],
+    )
+    .unwrap();
     let s = &cells[0].spec;
     assert_eq!(s.dataset.family, facelab::dataset::Family::Broad);
     assert_eq!(s.calibration, "experiments/au_observer_fit.csv");
     assert!(s.records("realfaces.frame_stride"));
-    let sweep = spec::load(&root().join("experiments/ablations/family.toml"), &[]).unwrap();
+    let sweep = spec::load(
+        &facelab::io::Layout::here(),
+        &root().join("experiments/ablations/family.toml"),
+        &[],
+    )
+    .unwrap();
     let names: Vec<&str> = sweep.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(
         names,
@@ -221,7 +248,12 @@ fn table2_reports_the_committed_real_file_per_seed_and_setting() {
 
 #[test]
 fn sweeps_expand_into_named_cells() {
-    let cells = spec::load(&root().join("experiments/ablations/depth.toml"), &[]).unwrap();
+    let cells = spec::load(
+        &facelab::io::Layout::here(),
+        &root().join("experiments/ablations/depth.toml"),
+        &[],
+    )
+    .unwrap();
     assert_eq!(cells.len(), 18);
     assert_eq!(cells[0].name, "model.layers=1,model.width=50");
     assert_eq!(cells[17].spec.model.layers, 6);
@@ -690,8 +722,12 @@ const NOT_YET_RERUN: &[&str] = &[];
 
 #[test]
 fn every_committed_run_is_from_todays_code_but_the_named_ones() {
-    let runs = facelab::run::committed(&root().join("results"), facelab::experiments::REGISTRY)
-        .expect("the committed runs plan");
+    let runs = facelab::run::committed(
+        &facelab::io::Layout::here(),
+        &root().join("results"),
+        facelab::experiments::REGISTRY,
+    )
+    .expect("the committed runs plan");
     assert!(runs.len() >= 6, "{} committed runs", runs.len());
     let mut wrong = Vec::new();
     for r in &runs {

@@ -1,7 +1,7 @@
 //! The AU observer on the simulated face.
 
-use facelab::io::calibration::{default_calibration_path, read_calibration};
-use facelab::io::expressions::{default_expressions_path, read_expressions};
+use facelab::io::calibration::read_calibration;
+use facelab::io::expressions::read_expressions;
 use facelab::observe::model_observer;
 use facelab::observe::{landmarks, Observer, AU_NAMES};
 use facelab::sim::expression::Expression;
@@ -12,7 +12,7 @@ use facelab::tools::observe::observe_state;
 use super::model;
 
 fn observer() -> Observer {
-    let table = read_calibration(&default_calibration_path()).unwrap();
+    let table = read_calibration(&facelab::io::Layout::here().calibration()).unwrap();
     model_observer(model(), table.calibration()).unwrap()
 }
 
@@ -37,7 +37,7 @@ fn rest_face_reads_no_action() {
 fn shipped_calibration_matches_the_model() {
     // Each AU's calibration activations must read its target with the shipped gains: the
     // table goes stale if the model changes without `facelab observe --calibrate`.
-    let table = read_calibration(&default_calibration_path()).unwrap();
+    let table = read_calibration(&facelab::io::Layout::here().calibration()).unwrap();
     for (k, row) in table.rows.iter().enumerate() {
         let read = aus_of(&table.activations(k).unwrap())[k];
         assert!(
@@ -51,7 +51,7 @@ fn shipped_calibration_matches_the_model() {
 
 #[test]
 fn defining_aus_rise_with_the_expression_scale() {
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     for (e, names) in [
         (Expression::Joy, ["AU12", "AU06"]),
         (Expression::Surprise, ["AU01", "AU26"]),
@@ -77,7 +77,7 @@ const SMILE_CROSS_TALK: [&str; 2] = ["AU17", "AU20"];
 
 #[test]
 fn joy_reads_lip_corner_puller_highest() {
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     let aus = aus_of(&weights.activations(Expression::Joy, 1.0));
     // The lip corner puller is the strongest of joy's FACS AUs or within 5% of it (the
     // cheeks' lid narrowing, AU07, reads 2.69 beside AU12 2.74), and only the smile's known
@@ -102,7 +102,7 @@ fn joy_reads_lip_corner_puller_highest() {
 
 #[test]
 fn head_rotation_changes_pose_not_aus() {
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     let m = model();
     let mut ws = Workspace::new(m).unwrap();
     let (state, _) = solve_from_rest(
@@ -151,7 +151,7 @@ fn prototype(e: Expression) -> &'static [&'static str] {
 
 #[test]
 fn each_expression_reads_its_prototype_aus_in_openface_range() {
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     for e in Expression::ALL {
         let aus = aus_of(&weights.activations(e, 1.0));
         let proto = prototype(e);

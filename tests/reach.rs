@@ -185,7 +185,7 @@ fn the_gallery_refuses_a_face_whose_lips_pass_through_each_other() {
     use facelab::tools::face::valid_pose;
     // Without the lip contact, zygomaticus major with the lower half of orbicularis oris
     // pushes the lower lip 2 mm through the upper one near the corners.
-    let mesh = facelab::io::mesh::read_obj(&facelab::io::mesh::default_mesh_path()).unwrap();
+    let mesh = facelab::io::mesh::read_obj(&facelab::io::Layout::here().mesh()).unwrap();
     let mut params = facelab::sim::FaceParams::default();
     params.tissue.lip_contact_stiffness = 0.0;
     let open = FaceModel::new(&mesh, params).unwrap();

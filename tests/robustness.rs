@@ -123,7 +123,8 @@ fn malformed_specs_and_overrides_are_errors_not_panics() {
         .collect();
     specs.sort();
     // The paper spec fully resolved (every key written out), as a run records it.
-    let resolved = facelab::spec::load(&dir.join("paper.toml"), &[]).unwrap()[0]
+    let resolved = facelab::spec::load(&facelab::io::Layout::here(), &dir.join("paper.toml"), &[])
+        .unwrap()[0]
         .spec
         .to_toml();
     let mut inputs: Vec<(String, Vec<u8>)> = specs
@@ -132,12 +133,13 @@ fn malformed_specs_and_overrides_are_errors_not_panics() {
         .collect();
     inputs.push(("resolved paper".into(), resolved.into_bytes()));
     let per_input = 4000 / inputs.len();
+    let layout = facelab::io::Layout::here();
     for (label, bytes) in &inputs {
         let found = fuzz(label, bytes, per_input, |m| {
             let text = String::from_utf8_lossy(m);
             let file = Path::new("fuzz.toml");
             if let Ok(tree) = facelab::spec::raw::parse_text(&text, file) {
-                let _ = facelab::spec::resolve::cells(tree, file);
+                let _ = facelab::spec::resolve::cells(tree, file, &layout);
             }
         });
         if let Some((i, m)) = found {

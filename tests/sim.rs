@@ -1,6 +1,6 @@
 //! Physics of the face model: the checks of issue 2.
 
-use facelab::io::expressions::{default_expressions_path, read_expressions};
+use facelab::io::expressions::read_expressions;
 use facelab::sim::expression::Expression;
 use facelab::sim::geom::{norm, sub, V3};
 use facelab::sim::solver::residual;
@@ -130,7 +130,7 @@ fn orbicularis_oculi_closes_the_eye() {
 #[test]
 fn residual_is_below_tolerance_at_return() {
     let m = model();
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     let s = solve(&weights.activations(Expression::Joy, 0.8));
     let mut ws = Workspace::new(m).unwrap();
     let r = residual(m, &s, &mut ws);
@@ -140,7 +140,7 @@ fn residual_is_below_tolerance_at_return() {
 #[test]
 fn no_inverted_elements_for_any_single_muscle_or_expression() {
     let m = model();
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     let mut cases: Vec<(String, Activations)> = Vec::new();
     for (index, name) in control_names().iter().enumerate() {
         if name == "auxiliary" {
@@ -171,7 +171,7 @@ fn no_inverted_elements_for_any_single_muscle_or_expression() {
 
 #[test]
 fn same_inputs_give_bit_identical_positions() {
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     let a = weights.sample(Expression::Fear, 0.7, 0.4);
     let bits =
         |s: &State| -> Vec<u64> { s.positions.iter().flatten().map(|c| c.to_bits()).collect() };
@@ -184,7 +184,7 @@ fn same_inputs_give_bit_identical_positions() {
 #[test]
 fn warm_solve_through_a_buckled_path_converges() {
     let m = model();
-    let weights = read_expressions(&default_expressions_path()).unwrap();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
     let samples = random_samples(&weights, 1, 21);
     let params = SolveParams::default();
     let mut ws = Workspace::new(m).unwrap();

@@ -24,7 +24,7 @@ use facelab::sim::FaceModel;
 pub fn model() -> &'static FaceModel {
     static MODEL: OnceLock<FaceModel> = OnceLock::new();
     MODEL.get_or_init(|| {
-        let mesh = facelab::io::mesh::read_obj(&facelab::io::mesh::default_mesh_path()).unwrap();
+        let mesh = facelab::io::mesh::read_obj(&facelab::io::Layout::here().mesh()).unwrap();
         FaceModel::new(&mesh, Default::default()).unwrap()
     })
 }

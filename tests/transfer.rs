@@ -56,7 +56,7 @@ fn identical() -> SubjectParams {
 
 #[test]
 fn subjects_differ_from_the_base_face_but_keep_its_topology() {
-    let source = FaceSource::default();
+    let source = FaceSource::of(&facelab::io::Layout::here());
     let (mesh, weights) = (source.mesh().unwrap(), source.weights().unwrap());
     let base = crate::model();
     let same = Subject::draw(&mesh, source.params(), &weights, &identical(), 1, "t", 0).unwrap();
@@ -87,7 +87,7 @@ fn subjects_differ_from_the_base_face_but_keep_its_topology() {
 
 #[test]
 fn video_heads_sway_about_their_mean_pose_and_images_hold_theirs() {
-    let source = FaceSource::default();
+    let source = FaceSource::of(&facelab::io::Layout::here());
     let (mesh, weights) = (source.mesh().unwrap(), source.weights().unwrap());
     let subject = Subject::draw(&mesh, source.params(), &weights, &identical(), 1, "t", 0).unwrap();
     let cohort = CohortParams::default();
@@ -121,7 +121,7 @@ fn video_heads_sway_about_their_mean_pose_and_images_hold_theirs() {
 
 #[test]
 fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
-    let source = FaceSource::default();
+    let source = FaceSource::of(&facelab::io::Layout::here());
     let (mesh, weights) = (source.mesh().unwrap(), source.weights().unwrap());
     let calibration = paper_calibration();
     let subject = Subject::draw(&mesh, source.params(), &weights, &identical(), 1, "t", 0).unwrap();
@@ -185,7 +185,9 @@ fn the_base_face_as_a_subject_transfers_its_own_expressions_back() {
 fn joy_file(dir: &Path, frames: usize) -> PathBuf {
     let model = crate::model();
     let observer = model_observer(model, paper_calibration()).unwrap();
-    let weights = FaceSource::default().weights().unwrap();
+    let weights = FaceSource::of(&facelab::io::Layout::here())
+        .weights()
+        .unwrap();
     let joy = facelab::tools::observe::observe_activations(
         model,
         &observer,

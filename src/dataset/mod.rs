@@ -437,14 +437,14 @@ pub fn from_csv(text: &str, name: &str) -> Result<Vec<Sample>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::expressions::{default_expressions_path, read_expressions};
-    use crate::io::facs::{data_path, read_facs, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
+    use crate::io::expressions::read_expressions;
+    use crate::io::facs::read_facs;
 
     fn draws(e: Expression, n: usize) -> Vec<(f64, Activations)> {
-        let weights = read_expressions(&default_expressions_path()).unwrap();
+        let weights = read_expressions(&crate::io::Layout::here().expressions()).unwrap();
         let facs = read_facs(
-            &data_path(DEFAULT_EXPRESSION_AUS),
-            &data_path(DEFAULT_AU_MUSCLES),
+            &crate::io::Layout::here().facs().0,
+            &crate::io::Layout::here().facs().1,
         )
         .unwrap();
         (0..n)
@@ -457,10 +457,10 @@ mod tests {
 
     #[test]
     fn detector_noise_is_per_sample_reproducible_and_of_its_stated_size() {
-        let weights = read_expressions(&default_expressions_path()).unwrap();
+        let weights = read_expressions(&crate::io::Layout::here().expressions()).unwrap();
         let facs = read_facs(
-            &data_path(DEFAULT_EXPRESSION_AUS),
-            &data_path(DEFAULT_AU_MUSCLES),
+            &crate::io::Layout::here().facs().0,
+            &crate::io::Layout::here().facs().1,
         )
         .unwrap();
         let params = DatasetParams {
@@ -533,7 +533,7 @@ mod tests {
 
     #[test]
     fn broad_samples_are_valid_reproducible_and_go_beyond_the_paper_family() {
-        let weights = read_expressions(&default_expressions_path()).unwrap();
+        let weights = read_expressions(&crate::io::Layout::here().expressions()).unwrap();
         let e = Expression::Joy;
         let a = draws(e, 400);
         assert_eq!(a, draws(e, 400), "the same streams give the same samples");

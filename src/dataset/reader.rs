@@ -130,7 +130,7 @@ impl FaceReader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::calibration::{default_calibration_path, read_calibration};
+    use crate::io::calibration::read_calibration;
     use crate::io::face::FaceSource;
     use crate::observe::model_observer;
     use crate::observe::pose::HeadPose;
@@ -138,7 +138,9 @@ mod tests {
     use crate::sim::{solve_from_rest, SolveParams, Workspace};
 
     fn joy(model: &FaceModel) -> State {
-        let weights = FaceSource::default().weights().unwrap();
+        let weights = FaceSource::of(&crate::io::Layout::here())
+            .weights()
+            .unwrap();
         let a = weights.sample(Expression::Joy, 1.0, 0.0);
         let mut ws = Workspace::new(model).unwrap();
         solve_from_rest(model, &a, &mut ws, &SolveParams::default())
@@ -152,8 +154,8 @@ mod tests {
     /// of the rest face, and a turned head's pose (17.0 degrees read for 15).
     #[test]
     fn render_reads_what_the_mesh_shows() {
-        let model = FaceSource::default().model().unwrap();
-        let calibration = read_calibration(&default_calibration_path())
+        let model = FaceSource::of(&crate::io::Layout::here()).model().unwrap();
+        let calibration = read_calibration(&crate::io::Layout::here().calibration())
             .unwrap()
             .calibration();
         let mesh = model_observer(&model, calibration.clone()).unwrap();

@@ -16,6 +16,7 @@
 //! faces (network, landmarks, AUs). Stage key (`photos`): the pictures' and the list's content, and the keys of the
 //! first seed's unified network and of the basis.
 
+use crate::io::Layout;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
@@ -66,8 +67,8 @@ impl Picture {
 }
 
 /// The pictures of `experiments/photos.csv` (`file,shows,licence`; `#` lines are comments).
-pub fn pictures() -> Result<Vec<Picture>> {
-    let list = crate::io::data_path(PHOTOS_LIST);
+pub fn pictures(layout: &Layout) -> Result<Vec<Picture>> {
+    let list = layout.file(PHOTOS_LIST);
     let text = std::fs::read_to_string(&list)
         .with_context(|| format!("{}: cannot read", list.display()))?;
     let mut out = Vec::new();
@@ -98,7 +99,7 @@ pub fn pictures() -> Result<Vec<Picture>> {
         out.push(Picture {
             file: cells[0].to_string(),
             shows: cells[1].to_string(),
-            path: crate::io::data_path(cells[0]),
+            path: layout.file(cells[0]),
         });
     }
     if out.is_empty() {
@@ -108,8 +109,8 @@ pub fn pictures() -> Result<Vec<Picture>> {
 }
 
 /// The list's and every picture's content, as key text.
-fn content(pictures: &[Picture], refinements: usize) -> Result<String> {
-    let list = crate::io::data_path(PHOTOS_LIST);
+fn content(layout: &Layout, pictures: &[Picture], refinements: usize) -> Result<String> {
+    let list = layout.file(PHOTOS_LIST);
     let mut content = format!(
         "list={}\nrefinements={refinements}\n",
         cache::sha256(&std::fs::read(&list).with_context(|| list.display().to_string())?)
@@ -171,7 +172,8 @@ impl Experiment for Photos {
     }
 
     fn plan(&self, plan: &mut Plan) -> Result<()> {
-        let content = content(&pictures()?, plan.spec.inversion.refinements)?;
+        let layout = &plan.spec.layout;
+        let content = content(layout, &pictures(layout)?, plan.spec.inversion.refinements)?;
         let k = plan.keys();
         let Some((_, train_key)) = k.unified().into_iter().next() else {
             bail!("the photo table needs a unified network (table1's training)");
@@ -182,9 +184,9 @@ impl Experiment for Photos {
     }
 
     fn run(&self, cx: &mut CellRun) -> Result<()> {
-        let list = pictures()?;
         let spec = cx.spec;
-        let content = content(&list, spec.inversion.refinements)?;
+        let list = pictures(&spec.layout)?;
+        let content = content(&spec.layout, &list, spec.inversion.refinements)?;
         let (n, k, model, basis) = (cx.networks()?, cx.keys()?, cx.model()?, cx.basis()?);
         let (_, train_key, mlp) = n
             .unified(&k)

@@ -13,11 +13,6 @@ use super::expressions::{controls_activations, parse_controls};
 
 pub const DEFAULT_CALIBRATION: &str = "experiments/au_calibration.csv";
 
-/// The default calibration path, resolved against the crate root when not found locally.
-pub fn default_calibration_path() -> PathBuf {
-    super::data_path(DEFAULT_CALIBRATION)
-}
-
 const HEADER: [&str; 5] = ["au", "controls", "target", "raw", "gain"];
 
 #[derive(Clone, Debug, PartialEq)]

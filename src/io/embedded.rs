@@ -3,7 +3,7 @@
 //! specs, and the committed default model (the paper's run: its unified network and the
 //! head-neck controller). The landmarker's weights and the font are compiled in where they
 //! are used. A data file found in the working folder or in a checkout wins
-//! ([`super::data_path`]); only where there is none are these bytes written out, once, to a
+//! ([`super::Layout::file`]); only where there is none are these bytes written out, once, to a
 //! folder named for their content under the user's cache folder, and read from there like a
 //! checkout, so every reader keeps taking paths.
 
@@ -123,7 +123,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         write_all(&dir).unwrap();
         assert_eq!(
-            super::super::find_root(&dir.join("experiments")),
+            super::super::layout::find_root(&dir.join("experiments")),
             Some(std::path::absolute(&dir).unwrap())
         );
         for (p, bytes) in FILES {

@@ -11,11 +11,6 @@ use crate::sim::Activations;
 
 pub const DEFAULT_EXPRESSIONS: &str = "experiments/expressions.csv";
 
-/// The default weights path, resolved against the crate root when not found locally.
-pub fn default_expressions_path() -> PathBuf {
-    super::data_path(DEFAULT_EXPRESSIONS)
-}
-
 #[derive(Debug, thiserror::Error)]
 pub enum ExpressionFileError {
     #[error("{path}: {cause}")]

@@ -5,45 +5,48 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 
-use crate::io::expressions::{default_expressions_path, read_expressions};
-use crate::io::mesh::{default_mesh_path, read_obj};
+use crate::io::expressions::read_expressions;
+use crate::io::mesh::read_obj;
+use crate::io::Layout;
 use crate::sim::expression::ExpressionWeights;
 use crate::sim::{FaceModel, FaceParams, Mesh};
 
 /// Where the face comes from.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct FaceSource {
-    /// OBJ mesh; default `assets/face/canonical_face.obj`.
-    pub mesh: Option<PathBuf>,
-    /// Expression weights; default `experiments/expressions.csv`.
-    pub expressions: Option<PathBuf>,
+    /// OBJ mesh (the layout's: `assets/face/canonical_face.obj`).
+    pub mesh: PathBuf,
+    /// Expression weights (the layout's: `experiments/expressions.csv`).
+    pub expressions: PathBuf,
     pub subdivisions: u8,
     /// `TissueParams::shear_modulus_fraction`; default that field's default.
     pub shear_modulus_fraction: Option<f64>,
 }
 
 impl FaceSource {
+    /// The committed face of a layout, at its default settings.
+    pub fn of(layout: &Layout) -> FaceSource {
+        FaceSource {
+            mesh: layout.mesh(),
+            expressions: layout.expressions(),
+            subdivisions: 0,
+            shear_modulus_fraction: None,
+        }
+    }
+
     pub fn model(&self) -> Result<FaceModel> {
         if let Some(f) = self.shear_modulus_fraction {
             if !(f.is_finite() && f >= 0.0) {
                 bail!("--shear-modulus-fraction must be a finite number >= 0, got {f}");
             }
         }
-        FaceModel::new(&self.mesh()?, self.params()).with_context(|| {
-            format!(
-                "{}: cannot build the face model",
-                self.mesh_path().display()
-            )
-        })
-    }
-
-    fn mesh_path(&self) -> PathBuf {
-        self.mesh.clone().unwrap_or_else(default_mesh_path)
+        FaceModel::new(&self.mesh()?, self.params())
+            .with_context(|| format!("{}: cannot build the face model", self.mesh.display()))
     }
 
     /// The base mesh (before subdivision, m).
     pub fn mesh(&self) -> Result<Mesh> {
-        Ok(read_obj(&self.mesh_path())?)
+        Ok(read_obj(&self.mesh)?)
     }
 
     pub fn params(&self) -> FaceParams {
@@ -58,10 +61,6 @@ impl FaceSource {
     }
 
     pub fn weights(&self) -> Result<ExpressionWeights> {
-        let path = self
-            .expressions
-            .clone()
-            .unwrap_or_else(default_expressions_path);
-        Ok(read_expressions(&path)?)
+        Ok(read_expressions(&self.expressions)?)
     }
 }

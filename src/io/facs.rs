@@ -5,8 +5,6 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-pub use super::data_path;
-
 use crate::observe::au::{au_index, AU_COUNT};
 use crate::sim::expression::Expression;
 
@@ -121,13 +119,12 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let one = dir.join("one.csv");
         std::fs::write(&one, "expression\njoy\n").unwrap();
-        let am = data_path(DEFAULT_AU_MUSCLES);
+        let (ea, am) = crate::io::Layout::here().facs();
         let err = read_facs(&one, &am).unwrap_err().to_string();
         assert!(
             err.contains("one.csv:2") && err.contains("expected 2"),
             "{err}"
         );
-        let ea = data_path(DEFAULT_EXPRESSION_AUS);
         std::fs::write(&one, "au\nAU12\n").unwrap();
         let err = read_facs(&ea, &one).unwrap_err().to_string();
         assert!(

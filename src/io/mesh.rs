@@ -8,12 +8,6 @@ use crate::sim::{Mesh, MeshError};
 /// The committed base mesh, relative to the crate root.
 pub const DEFAULT_MESH: &str = "assets/face/canonical_face.obj";
 
-/// The default mesh path, resolved against the crate root so the binary works from any
-/// directory of the checkout.
-pub fn default_mesh_path() -> PathBuf {
-    super::data_path(DEFAULT_MESH)
-}
-
 #[derive(Debug, thiserror::Error)]
 pub enum MeshFileError {
     #[error("{path}: {cause}")]

@@ -268,8 +268,7 @@ mod tests {
 
     #[test]
     fn the_shipped_input_lists_read_and_bad_ones_are_named() {
-        let shipped =
-            read_readout_inputs(&super::super::data_path(DEFAULT_READOUT_INPUTS)).unwrap();
+        let shipped = read_readout_inputs(&crate::io::Layout::here().readout_inputs()).unwrap();
         let names = input_names();
         let au12 = au_index("AU12").unwrap();
         let m12 = names.iter().position(|n| n == "m_AU12+").unwrap();

@@ -15,11 +15,6 @@ use super::expressions::parse_controls;
 
 pub const DEFAULT_REACH: &str = "experiments/au_reach.csv";
 
-/// The default table path, resolved against the crate root when not found locally.
-pub fn default_reach_path() -> PathBuf {
-    super::data_path(DEFAULT_REACH)
-}
-
 const HEADER: [&str; 11] = [
     "row",
     "controls",

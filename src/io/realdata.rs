@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use super::observer_fit::{read_realdata, ObserverFileError};
+use super::DataFile;
 
 /// Why the listed real files cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -19,21 +20,20 @@ pub enum RealDataError {
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct RealfacesParams {
     /// The list of files (`file,person,licence`), relative to the repository.
-    pub files: String,
-    /// The folder the listed paths are relative to; `None`: `../shared/realdata`.
+    pub files: DataFile,
+    /// The folder the listed paths are relative to, as the spec gives it; `None`: the
+    /// layout's (`../shared/realdata`).
     pub data: Option<String>,
+    /// That folder, resolved when the spec was loaded.
+    #[serde(skip)]
+    pub root: PathBuf,
     /// Every n-th used frame of each file is transferred (1: all).
     pub frame_stride: usize,
 }
 
-impl Default for RealfacesParams {
-    fn default() -> Self {
-        RealfacesParams {
-            files: "experiments/realdata.csv".into(),
-            data: None,
-            frame_stride: 1,
-        }
-    }
+impl RealfacesParams {
+    /// `realfaces.files` when a spec does not set it.
+    pub const DEFAULT_FILES: &'static str = super::observer_fit::DEFAULT_REALDATA;
 }
 
 /// One listed file, found on disk.
@@ -45,36 +45,27 @@ pub struct RealInput {
     pub path: PathBuf,
 }
 
-/// The data folder of a spec's real files.
-pub fn data_root(p: &RealfacesParams) -> PathBuf {
-    match &p.data {
-        Some(d) => PathBuf::from(d),
-        None => default_realdata_root(),
-    }
-}
-
 /// A committed OpenFace file named by a path relative to the repository (Table 2's
 /// `table2.openface`), its person named after its folder (`assets/openface/py-feat/x.csv`:
 /// "py-feat").
-pub fn committed_input(file: &str) -> RealInput {
-    let path = super::data_path(file);
-    let person = std::path::Path::new(file)
+pub fn committed_input(file: &DataFile) -> RealInput {
+    let person = std::path::Path::new(&file.name)
         .parent()
         .and_then(|p| p.file_name())
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "real".into());
     RealInput {
-        file: file.into(),
+        file: file.name.clone(),
         person,
-        path,
+        path: file.path.clone(),
     }
 }
 
 /// The listed files, each checked to exist; the error says what is missing and how to give it.
 pub fn inputs(p: &RealfacesParams) -> Result<Vec<RealInput>, RealDataError> {
-    let list = super::data_path(&p.files);
-    let root = data_root(p);
-    let listed = read_realdata(&list)?;
+    let list = &p.files.path;
+    let root = &p.root;
+    let listed = read_realdata(list)?;
     let mut out = Vec::with_capacity(listed.len());
     let mut missing = Vec::new();
     for f in listed {
@@ -101,14 +92,4 @@ pub fn inputs(p: &RealfacesParams) -> Result<Vec<RealInput>, RealDataError> {
         )));
     }
     Ok(out)
-}
-
-/// Where `observe --fit` and the real-data table read the real files from when not told:
-/// `../shared/realdata` of the working folder, else beside the checkout (`data_root()`).
-pub fn default_realdata_root() -> PathBuf {
-    let local = PathBuf::from("../shared/realdata");
-    match super::data_root() {
-        Some(root) if !local.exists() => root.join("../shared/realdata"),
-        _ => local,
-    }
 }

@@ -4,6 +4,7 @@
 //! made before a stage's code changed its output (and bumped its version) recorded a key
 //! today's code no longer plans.
 
+use crate::io::Layout;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -34,26 +35,27 @@ impl Committed {
 
 /// Every committed run under `results` (each experiment folder's `latest`), in name order,
 /// planned with `registry` through the cache in `results/.cache`.
-pub fn committed(results: &Path, registry: Registry) -> Result<Vec<Committed>> {
+pub fn committed(layout: &Layout, results: &Path, registry: Registry) -> Result<Vec<Committed>> {
     let mut latest: Vec<PathBuf> = std::fs::read_dir(results)
         .with_context(|| format!("{}: cannot list", results.display()))?
         .filter_map(|e| Some(e.ok()?.path().join("latest")))
         .filter(|p| p.join("manifest.json").is_file())
         .collect();
     latest.sort();
-    let a = assets()?;
+    let a = assets(layout)?;
     let cache = Cache::new(&results.join(".cache"));
     latest
         .iter()
         .map(|l| {
             let run = std::fs::canonicalize(l)
                 .with_context(|| format!("{}: cannot resolve", l.display()))?;
-            against_today(&run, &a, &cache, registry)
+            against_today(layout, &run, &a, &cache, registry)
         })
         .collect()
 }
 
 fn against_today(
+    layout: &Layout,
     run: &Path,
     a: &crate::run::cell::Assets,
     cache: &Cache,
@@ -72,7 +74,7 @@ fn against_today(
     let mut unknown_stages: BTreeSet<String> = BTreeSet::new();
     for prefix in &prefixes {
         let spec_path = run.join(prefix).join("spec.toml");
-        let cells = spec::load(&spec_path, &[])?;
+        let cells = spec::load(layout, &spec_path, &[])?;
         let cell = prefix.trim_end_matches('/');
         let plan = Plan::of(
             &cells[0].spec,

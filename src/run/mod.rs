@@ -13,6 +13,7 @@
 //! resolved `spec.toml`, `manifest.json` and CSVs; `results/<experiment>/latest` points at it.
 //! Until the manifest is written the folder is `run-NNNN.partial`.
 
+use crate::io::Layout;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -51,17 +52,20 @@ pub struct RunOptions {
     pub registry: Registry,
     /// What the run prints (the command line's `--quiet` / `--verbose`).
     pub verbosity: Verbosity,
+    /// Where the checkout's files are (the spec's data files, the face).
+    pub layout: Layout,
 }
 
 /// Where a spec's run runs: `--launcher` if given, else the spec's `[launcher] kind`.
 pub fn launcher_of(
+    layout: &Layout,
     spec_path: &Path,
     sets: &[String],
     given: Option<spec::LauncherKind>,
 ) -> Result<spec::LauncherKind> {
     match given {
         Some(kind) => Ok(kind),
-        None => Ok(spec::load(spec_path, sets)?[0].spec.launcher.kind),
+        None => Ok(spec::load(layout, spec_path, sets)?[0].spec.launcher.kind),
     }
 }
 
@@ -105,7 +109,7 @@ impl Sink for RunSink<'_> {
 
 /// Runs every cell of a spec file.
 pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
-    let cells = spec::load(spec_path, &opts.sets)?;
+    let cells = spec::load(&opts.layout, spec_path, &opts.sets)?;
     // The real files are outside the repository: say what is missing before computing.
     for cell in &cells {
         if cell.spec.tables.contains(&crate::spec::Table::Realfaces) {
@@ -113,7 +117,7 @@ pub fn run(spec_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
                 .with_context(|| format!("{}", spec_path.display()))?;
         }
     }
-    let a = assets()?;
+    let a = assets(&opts.layout)?;
     let cache = Cache::new(&opts.results.join(".cache"));
     cache.remove_stale();
     let experiment = cells[0].spec.experiment.clone();
@@ -292,13 +296,14 @@ pub struct StatusLine {
 /// `facelab status`: every unit of work of every cell and whether the cache holds it. Reads
 /// only: nothing is computed, removed or written.
 pub fn status(
+    layout: &Layout,
     spec_path: &Path,
     sets: &[String],
     results: &Path,
     registry: Registry,
 ) -> Result<Vec<StatusLine>> {
-    let cells = spec::load(spec_path, sets)?;
-    let a = assets()?;
+    let cells = spec::load(layout, spec_path, sets)?;
+    let a = assets(layout)?;
     let cache = Cache::new(&results.join(".cache"));
     let slurm = slurm::unit_states(results, &cells[0].spec.experiment);
     let mut out = Vec::new();
@@ -360,6 +365,7 @@ pub(super) fn recorded(run_dir: &Path) -> Result<(serde_json::Value, Vec<String>
 }
 
 pub fn verify(
+    layout: &Layout,
     run_dir: &Path,
     threads: usize,
     registry: Registry,
@@ -385,6 +391,7 @@ pub fn verify(
                 assemble: None,
                 registry,
                 verbosity,
+                layout: layout.clone(),
             },
         );
         let summary = match summary {

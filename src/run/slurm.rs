@@ -17,6 +17,7 @@
 //! (the tasks, their units and job ids), each task's log and, once it succeeded, its
 //! `.done.json` (host, seconds, job id).
 
+use crate::io::Layout;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -229,8 +230,8 @@ fn read_launch(path: &Path) -> Result<Launch> {
 /// Submits a spec's run as Slurm jobs (see the module's documentation).
 pub fn launch(spec_path: &Path, opts: &RunOptions) -> Result<Launched> {
     require_slurm()?;
-    let cells = spec::load(spec_path, &opts.sets)?;
-    let a = assets()?;
+    let cells = spec::load(&opts.layout, spec_path, &opts.sets)?;
+    let a = assets(&opts.layout)?;
     let results = absolute(&opts.results)?;
     let cache = Cache::new(&results.join(".cache"));
     let launcher = cells[0].spec.launcher.clone();
@@ -433,6 +434,7 @@ pub fn wait(launched: &Launched) -> Result<()> {
 
 /// A task, as Slurm runs it: the cell's units for one seed into the cache, nothing else.
 pub fn task(
+    layout: &Layout,
     launch_file: &Path,
     array: &str,
     index: Option<usize>,
@@ -453,13 +455,13 @@ pub fn task(
         .iter()
         .find(|t| t.array == array && t.index == index)
         .with_context(|| format!("{}: no task {array}-{index}", launch_file.display()))?;
-    let cells = spec::load(&launch.spec, &launch.sets)?;
+    let cells = spec::load(layout, &launch.spec, &launch.sets)?;
     let c: &Cell = cells
         .get(t.cell)
         .with_context(|| format!("{}: no cell {}", launch.spec.display(), t.cell))?;
     let spec = task_spec(&c.spec, t.seed);
     let experiments = task_experiments(&c.spec, t.seed, registry);
-    let a = assets()?;
+    let a = assets(layout)?;
     let cache = Cache::new(&launch.results.join(".cache"));
     let mut records = Vec::new();
     let mut sink = Discard;

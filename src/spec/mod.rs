@@ -6,6 +6,7 @@
 pub mod raw;
 pub mod resolve;
 
+use crate::io::Layout;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -39,14 +40,15 @@ pub enum SpecError {
 }
 
 /// Loads a spec file with its `extends` chain and `--set` overrides, and resolves every
-/// sweep cell.
-pub fn load(path: &Path, sets: &[String]) -> Result<Vec<Cell>, SpecError> {
-    let mut tree = raw::load(path)?;
+/// sweep cell; its data files (and an `extends` that is not beside it) are found with
+/// `layout`, which each cell's spec keeps for the stages.
+pub fn load(layout: &Layout, path: &Path, sets: &[String]) -> Result<Vec<Cell>, SpecError> {
+    let mut tree = raw::load(layout, path)?;
     for text in sets {
         let (key, node) = raw::parse_override(text)?;
         raw::set_path(&mut tree, &key, node)?;
     }
-    resolve::cells(tree, path)
+    resolve::cells(tree, path, layout)
 }
 
 /// The resolved values of a cell as TOML text (`Spec::to_toml`).

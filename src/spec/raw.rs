@@ -2,6 +2,7 @@
 //! (file, line, column, or the `--set` that gave it), with `extends` chains merged and
 //! command-line overrides applied. Nothing here knows which keys exist; `resolve` does.
 
+use crate::io::Layout;
 use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -196,9 +197,9 @@ pub fn merge(base: &mut BTreeMap<String, Node>, over: BTreeMap<String, Node>) {
 }
 
 /// Loads `path` with its `extends` chain (each relative to the file naming it), base first.
-pub fn load(path: &Path) -> Result<BTreeMap<String, Node>, SpecError> {
+pub fn load(layout: &Layout, path: &Path) -> Result<BTreeMap<String, Node>, SpecError> {
     let mut chain: Vec<(PathBuf, String)> = Vec::new();
-    load_chain(path, &mut chain)
+    load_chain(layout, path, &mut chain)
 }
 
 /// `path` relative to the working folder where it lies below it, else as it is.
@@ -213,6 +214,7 @@ fn shown(path: &Path) -> String {
 /// Loads one file of an `extends` chain; `chain` holds the files above it, each with how it
 /// names its base (`file:line`, for the cycle message).
 fn load_chain(
+    layout: &Layout,
     path: &Path,
     chain: &mut Vec<(PathBuf, String)>,
 ) -> Result<BTreeMap<String, Node>, SpecError> {
@@ -249,7 +251,7 @@ fn load_chain(
             // (`extends = "experiments/paper.toml"` from a spec of one's own, anywhere).
             let mut base_path = path.parent().unwrap_or(Path::new(".")).join(&base);
             if !base_path.exists() && Path::new(&base).is_relative() {
-                let found = crate::io::data_path(&base);
+                let found = layout.file(&base);
                 if found.exists() {
                     base_path = found;
                 }
@@ -261,7 +263,7 @@ fn load_chain(
                     message: format!("{} does not exist", base_path.display()),
                 });
             }
-            let mut merged = load_chain(&base_path, chain)?;
+            let mut merged = load_chain(layout, &base_path, chain)?;
             merge(&mut merged, own);
             merged
         }

@@ -100,7 +100,13 @@ pub fn edit_file(
 /// subjects (their own geometry, stiffness and muscle strengths; `experiments/base.toml`'s
 /// `[cohort]`), as a grid of renders at `frames` (Choe et al.'s Fig. 10) and an animated GIF
 /// of all faces side by side.
-pub fn retarget(input: &Path, subjects: usize, frames: &[f64], out: &Path) -> Result<Vec<PathBuf>> {
+pub fn retarget(
+    layout: &crate::io::Layout,
+    input: &Path,
+    subjects: usize,
+    frames: &[f64],
+    out: &Path,
+) -> Result<Vec<PathBuf>> {
     use crate::cohort::{CohortKind, Subject};
     use crate::report::compose::{gif_bytes, labelled_grid, png_bytes};
     use crate::report::render::{render, RenderOptions};
@@ -129,8 +135,8 @@ pub fn retarget(input: &Path, subjects: usize, frames: &[f64], out: &Path) -> Re
             bail!("{}: no frame {f} to render", input.display());
         }
     }
-    let spec = crate::spec::load(&crate::io::data_path("experiments/base.toml"), &[])?.remove(0);
-    let source = crate::io::face::FaceSource::default();
+    let spec = crate::spec::load(layout, &layout.file("experiments/base.toml"), &[])?.remove(0);
+    let source = crate::io::face::FaceSource::of(layout);
     let (mesh, weights) = (source.mesh()?, source.weights()?);
     let mut faces = vec![("base model".to_string(), source.model()?)];
     for i in 0..subjects {

@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use crate::io::atomic::write_atomic;
 use crate::io::expressions::controls_activations;
 use crate::io::face::FaceSource;
-use crate::io::reach::{default_reach_path, read_reach};
+use crate::io::reach::read_reach;
 use crate::judge::{groups, Judge, Reading, GROUPS, GROUP_LABELS};
 use crate::landmark::{Blendshapes, BLENDSHAPE_NAMES};
 use crate::observe::au::AU_NAMES;
@@ -106,9 +106,9 @@ pub fn valid_pose(
 /// Each AU's FACS muscles at full activation (the AU rows of the range-of-motion table;
 /// combined actions and second measures of an AU's face, `AU12_width`, are not AUs of their
 /// own).
-pub fn au_alone_cases() -> Result<Vec<(String, Activations)>> {
+pub fn au_alone_cases(layout: &crate::io::Layout) -> Result<Vec<(String, Activations)>> {
     let mut out = Vec::new();
-    for row in read_reach(&default_reach_path())? {
+    for row in read_reach(&layout.reach())? {
         if crate::observe::au::au_index(&row.row).is_none_or(|k| AU_NAMES[k] != row.row) {
             continue;
         }
@@ -130,7 +130,11 @@ pub struct JudgeLine {
 /// expressions at s = 1 and each AU's muscles alone, rendered frontally (`render`) and from
 /// the projected vertices (`mesh`). Writes `judge.csv` (`case,reading,success` and the 52
 /// scores) and `judge.png` (the groups of the render reading as a heat map).
-pub fn face_judge(source: &FaceSource, out: &Path) -> Result<(Vec<JudgeLine>, Vec<PathBuf>)> {
+pub fn face_judge(
+    layout: &crate::io::Layout,
+    source: &FaceSource,
+    out: &Path,
+) -> Result<(Vec<JudgeLine>, Vec<PathBuf>)> {
     let model = source.model()?;
     let weights = source.weights()?;
     let judge = Judge::new()?;
@@ -139,7 +143,7 @@ pub fn face_judge(source: &FaceSource, out: &Path) -> Result<(Vec<JudgeLine>, Ve
     for e in Expression::ALL {
         cases.push((format!("{e} (s = 1)"), weights.activations(e, 1.0)));
     }
-    for (au, a) in au_alone_cases()? {
+    for (au, a) in au_alone_cases(layout)? {
         cases.push((format!("{au} alone"), a));
     }
     let options = RenderOptions::default();
@@ -215,7 +219,11 @@ pub fn render_to(
 
 /// `facelab gallery`: the rest face, each expression at s = 1 (frontal and three-quarter),
 /// each muscle and jaw input alone at 1.0, and a muscle overlay.
-pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
+pub fn gallery(
+    layout: &crate::io::Layout,
+    source: &FaceSource,
+    out: &Path,
+) -> Result<Vec<PathBuf>> {
     let model = source.model()?;
     let weights = source.weights()?;
     let mut ws = Workspace::new(&model)?;
@@ -272,7 +280,7 @@ pub fn gallery(source: &FaceSource, out: &Path) -> Result<Vec<PathBuf>> {
             out.join("single").join(format!("{name}.png")),
         )?;
     }
-    for (au, a) in au_alone_cases()? {
+    for (au, a) in au_alone_cases(layout)? {
         let state = valid_pose(&model, &a, &mut ws, &au)?;
         sheet.push((format!("{au} alone"), render(&model, &state, &small)));
     }

@@ -178,8 +178,6 @@ pub fn print_agreement(a: &Agreement, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
-pub use crate::io::realdata::default_realdata_root;
-
 /// One row of the validation report: how well an observer reproduces OpenFace's AU on the
 /// frames of `scope` (a held-out person, or `pooled` over all held-out frames).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -15,7 +15,6 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::io::atomic::write_atomic;
-use crate::io::calibration::default_calibration_path;
 use crate::io::expressions::controls_activations;
 use crate::io::face::FaceSource;
 use crate::io::observer_fit::read_any_calibration;
@@ -179,15 +178,12 @@ fn text(v: f64) -> String {
 pub fn write_reach(
     source: &FaceSource,
     table: &Path,
-    calibration: Option<&Path>,
+    calibration: &Path,
     out: &Path,
 ) -> Result<(Vec<Reach>, Vec<PathBuf>)> {
     let model = source.model()?;
     let rows = read_reach(table)?;
-    let calibration_path = calibration
-        .map(Path::to_path_buf)
-        .unwrap_or_else(default_calibration_path);
-    let observer = model_observer(&model, read_any_calibration(&calibration_path)?)?;
+    let observer = model_observer(&model, read_any_calibration(calibration)?)?;
     let measured = reach(&model, &observer, &rows)?;
     let lines: Vec<ReachLine> = measured
         .iter()
@@ -235,7 +231,7 @@ pub fn write_reach(
         &format!(
             "Observer AUs (0-5, {}) of each muscle group (both sides) and jaw input at full \
              activation",
-            calibration_path
+            calibration
                 .file_name()
                 .map_or(String::new(), |n| n.to_string_lossy().into_owned())
         ),

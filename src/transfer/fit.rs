@@ -27,12 +27,16 @@ pub struct Fitted {
 
 /// The landmark-space fit of every used row of an OpenFace file with 3D landmarks, against
 /// the file's own neutral face (the per-landmark median of its rows), indexed by `frame - 1`.
-pub(super) fn openface_fit(file: &OpenFaceFile, run: &Path) -> Result<Vec<Option<Fitted>>> {
+pub(super) fn openface_fit(
+    file: &OpenFaceFile,
+    layout: &crate::io::Layout,
+    run: &Path,
+) -> Result<Vec<Option<Fitted>>> {
     use crate::io::openface::{camera_faces, observable};
     use crate::observe::median_face;
     let input = &file.path;
     observable(file).context("--method landmarks fits the file's 3D landmarks")?;
-    let spec = run_spec(run)?;
+    let spec = run_spec(layout, run)?;
     let model = spec.face_source().model()?;
     let calibration = crate::run::cell::spec_calibration(&spec)?;
     let faces = camera_faces(file);

@@ -63,6 +63,8 @@ pub struct TransferOptions {
     /// landmark-space fit), each with its face already solved; `None`: the network's, from
     /// the AUs.
     pub fitted: Option<Vec<Option<Fitted>>>,
+    /// Where the checkout's files are (the runs' specs name data files relative to it).
+    pub layout: crate::io::Layout,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -140,9 +142,9 @@ fn training_normalizer(path: &Path, kind: Normalization) -> Result<Normalizer> {
 }
 
 /// The spec a run folder was made with (its `spec.toml`).
-fn run_spec(run: &Path) -> Result<crate::spec::Spec> {
+fn run_spec(layout: &crate::io::Layout, run: &Path) -> Result<crate::spec::Spec> {
     let path = run.join("spec.toml");
-    Ok(crate::spec::load(&path, &[])
+    Ok(crate::spec::load(layout, &path, &[])
         .with_context(|| format!("{}: the run's spec", path.display()))?
         .remove(0)
         .spec)
@@ -176,7 +178,7 @@ fn unified_network(run: &Path) -> Result<Mlp> {
 /// read only where the activations are not `opts.fitted`.
 pub fn transfer_frames(file: &OpenFaceFile, opts: &TransferOptions) -> Result<TransferSummary> {
     let run = &opts.model;
-    let spec = run_spec(run)?;
+    let spec = run_spec(&opts.layout, run)?;
     let name = file.path.display();
     if file.rows.is_empty() {
         bail!("{name}: no row with success = 1 ({} skipped)", file.skipped);
@@ -436,9 +438,9 @@ pub fn transfer_path(
         let file = read_openface(input)?;
         let fitted = match TransferMethod::for_input(input, method)? {
             TransferMethod::Network => None,
-            TransferMethod::Landmarks => Some(openface_fit(&file, &opts.model)?),
+            TransferMethod::Landmarks => Some(openface_fit(&file, &opts.layout, &opts.model)?),
             TransferMethod::Aus => {
-                let spec = run_spec(&opts.model)?;
+                let spec = run_spec(&opts.layout, &opts.model)?;
                 let model = spec.face_source().model()?;
                 let calibration = crate::run::cell::spec_calibration(&spec)?;
                 Some(au_space_fit(
@@ -462,7 +464,7 @@ pub fn transfer_path(
         };
         return Ok((transfer_frames(&file, &opts)?, None));
     }
-    let spec = run_spec(&opts.model)?;
+    let spec = run_spec(&opts.layout, &opts.model)?;
     // Pictures always have a head pose: without a controller, say so before any work.
     if !opts.ignore_pose {
         let weights = neck_weights(opts);
@@ -516,7 +518,7 @@ mod tests {
     /// starts from frame 1's state.
     #[test]
     fn a_frame_that_fails_twice_is_skipped_and_the_clip_goes_on() {
-        let model = FaceSource::default().model().unwrap();
+        let model = FaceSource::of(&crate::io::Layout::here()).model().unwrap();
         let mut ws = Workspace::new(&model).unwrap();
         let frames = vec![Activations::neutral(); 4];
         let mut starts = Vec::new();

@@ -180,7 +180,7 @@ fn neck_run(
     spec: &crate::spec::Spec,
 ) -> Result<(PathBuf, crate::sim::neck::Neck)> {
     let neck = match &opts.neck {
-        Some(dir) => run_spec(dir)?.headpose.neck(),
+        Some(dir) => run_spec(&opts.layout, dir)?.headpose.neck(),
         None => spec.headpose.neck(),
     };
     Ok((neck_weights(opts), neck))

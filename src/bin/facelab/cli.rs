@@ -43,10 +43,12 @@ pub struct FaceArgs {
 }
 
 impl FaceArgs {
-    pub fn source(&self) -> FaceSource {
+    /// The face these arguments name; what they leave out is the layout's.
+    pub fn source(&self, layout: &facelab::io::Layout) -> FaceSource {
+        let given = FaceSource::of(layout);
         FaceSource {
-            mesh: self.mesh.clone(),
-            expressions: self.expressions.clone(),
+            mesh: self.mesh.clone().unwrap_or(given.mesh),
+            expressions: self.expressions.clone().unwrap_or(given.expressions),
             subdivisions: self.subdivisions,
             shear_modulus_fraction: self.shear_modulus_fraction,
         }

@@ -13,30 +13,34 @@ use facelab::run::stage::Verbosity;
 use cli::{Cli, Command};
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    // Handed to the commands that run stages; nothing else prints progress.
+    // Only the commands that run stages print progress.
     let verbosity = match (cli.quiet, cli.verbose) {
         (true, _) => Verbosity::Quiet,
         (_, true) => Verbosity::Verbose,
         _ => Verbosity::Normal,
     };
     let threads = commands::set_threads(cli.command.threads())?;
-    if let Some(path) = cli.command.anchor() {
-        facelab::io::set_data_root(path.parent().unwrap_or(path));
-    }
+    let cx = commands::Context {
+        // The checkout the data files come from: the working folder's, else the one holding
+        // the spec or run folder the command names.
+        layout: facelab::io::Layout::find(cli.command.anchor()),
+        threads,
+        verbosity,
+    };
     match cli.command {
-        Command::Render(args) => commands::render::run(args),
-        Command::Gallery(args) => commands::gallery::run(args),
-        Command::Observe(args) => commands::observe::run(args),
-        Command::Run(args) => commands::run::run(args, threads, verbosity),
-        Command::Task(args) => commands::task::run(args, verbosity),
-        Command::Check(args) => commands::check::run(args),
-        Command::Status(args) => commands::status::run(args),
-        Command::Verify(args) => commands::verify::run(args, threads, verbosity),
-        Command::Transfer(args) => commands::transfer::run(args),
-        Command::Edit(args) => commands::edit::run(args),
-        Command::Retarget(args) => commands::retarget::run(args),
-        Command::Face { what } => commands::face::run(what),
-        Command::Bench { what } => commands::bench::run(what),
+        Command::Render(args) => commands::render::run(args, &cx),
+        Command::Gallery(args) => commands::gallery::run(args, &cx),
+        Command::Observe(args) => commands::observe::run(args, &cx),
+        Command::Run(args) => commands::run::run(args, &cx),
+        Command::Task(args) => commands::task::run(args, &cx),
+        Command::Check(args) => commands::check::run(args, &cx),
+        Command::Status(args) => commands::status::run(args, &cx),
+        Command::Verify(args) => commands::verify::run(args, &cx),
+        Command::Transfer(args) => commands::transfer::run(args, &cx),
+        Command::Edit(args) => commands::edit::run(args, &cx),
+        Command::Retarget(args) => commands::retarget::run(args, &cx),
+        Command::Face { what } => commands::face::run(what, &cx),
+        Command::Bench { what } => commands::bench::run(what, &cx),
     }
 }
 

@@ -265,7 +265,7 @@ pub fn transfer_unit(
         TRANSFER_VERSION,
         &TransferInputs {
             normalization: spec.table2_normalization,
-            openface: spec.table2_openface.as_deref(),
+            openface: spec.table2_openface.as_ref().map(|f| f.name.as_str()),
         },
         &inputs,
     )

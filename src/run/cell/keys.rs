@@ -6,10 +6,9 @@ use super::networks::{train_keys, Network};
 use crate::cache;
 use crate::dataset::reader::Source;
 use crate::dataset::{DatasetParams, Family, SolveStart};
-use crate::io::expressions::default_expressions_path;
-use crate::io::facs::{data_path, read_facs, FacsMaps, DEFAULT_AU_MUSCLES, DEFAULT_EXPRESSION_AUS};
-use crate::io::mesh::default_mesh_path;
+use crate::io::facs::{read_facs, FacsMaps};
 use crate::io::observer_fit::read_any_calibration;
+use crate::io::Layout;
 use crate::observe::Calibration;
 use crate::observe::ObserverNoise;
 use crate::run::stage::Unit;
@@ -73,14 +72,14 @@ impl Assets {
         Ok(format!(
             "{}{}",
             self.expressions,
-            file_hash(&data_path(&spec.calibration))?
+            file_hash(&spec.calibration.path)?
         ))
     }
 }
 
 /// The spec's observer calibration (`observer.calibration`: gains or a fitted readout).
 pub(crate) fn spec_calibration(spec: &Spec) -> Result<Calibration> {
-    read_any_calibration(&data_path(&spec.calibration))
+    read_any_calibration(&spec.calibration.path)
         .with_context(|| format!("observer.calibration = \"{}\"", spec.calibration))
 }
 
@@ -93,11 +92,11 @@ pub(crate) fn spec_calibration(spec: &Spec) -> Result<Calibration> {
 // behind the chin.
 pub(crate) const FACE_VERSION: u32 = 1;
 
-pub(crate) fn assets() -> Result<Assets> {
-    let face = format!("{}/face-{FACE_VERSION}", file_hash(&default_mesh_path())?);
-    let expressions = file_hash(&default_expressions_path())?;
-    let ea = data_path(DEFAULT_EXPRESSION_AUS);
-    let am = data_path(DEFAULT_AU_MUSCLES);
+/// The checkout's face, expression weights and FACS tables, by content.
+pub(crate) fn assets(layout: &Layout) -> Result<Assets> {
+    let face = format!("{}/face-{FACE_VERSION}", file_hash(&layout.mesh())?);
+    let expressions = file_hash(&layout.expressions())?;
+    let (ea, am) = layout.facs();
     let facs = read_facs(&ea, &am)?;
     let facs_hash = format!("{}{}", file_hash(&ea)?, file_hash(&am)?);
     Ok(Assets {
@@ -151,7 +150,7 @@ pub(crate) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
             family: d.family,
             seed: d.seed,
             observer,
-            calibration: &spec.calibration,
+            calibration: &spec.calibration.name,
             source: spec.observer_source,
         };
         let basis: Vec<&str> = basis.iter().map(String::as_str).collect();

@@ -1,19 +1,19 @@
 //! The solver's tests: equilibrium, residual, continuation, determinism.
 
 use super::*;
-use crate::io::mesh::{default_mesh_path, read_obj};
+use crate::io::mesh::read_obj;
 use crate::rng::stream;
 use crate::sim::geom::{norm, scale, sub, V3};
 use crate::sim::model::FaceParams;
 
 fn model() -> FaceModel {
-    let mesh = read_obj(&default_mesh_path()).unwrap();
+    let mesh = read_obj(&crate::io::Layout::here().mesh()).unwrap();
     FaceModel::new(&mesh, FaceParams::default()).unwrap()
 }
 
 /// LTW95's springs without the prisms' shear term.
 fn springs_only_model() -> FaceModel {
-    let mesh = read_obj(&default_mesh_path()).unwrap();
+    let mesh = read_obj(&crate::io::Layout::here().mesh()).unwrap();
     let mut params = FaceParams::default();
     params.tissue.shear_modulus_fraction = 0.0;
     FaceModel::new(&mesh, params).unwrap()
@@ -158,7 +158,7 @@ fn crossing_activations() -> Activations {
 }
 
 fn no_lip_contact_model() -> FaceModel {
-    let mesh = read_obj(&default_mesh_path()).unwrap();
+    let mesh = read_obj(&crate::io::Layout::here().mesh()).unwrap();
     let mut params = FaceParams::default();
     params.tissue.lip_contact_stiffness = 0.0;
     FaceModel::new(&mesh, params).unwrap()

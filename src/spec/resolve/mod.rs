@@ -2,6 +2,7 @@
 //! types and ranges, filling defaults, and rejecting keys nobody reads (with the nearest
 //! valid name suggested). Sweeps expand here into named cells.
 
+use crate::io::{DataFile, Layout};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
@@ -99,7 +100,7 @@ pub struct Spec {
     /// The observer's calibration (`observer.calibration`): the gains table
     /// `experiments/au_calibration.csv` (default) or a readout fitted to OpenFace
     /// (`experiments/au_observer_fit.csv`), relative to the repository.
-    pub calibration: String,
+    pub calibration: DataFile,
     /// Where the observer reads simulated faces from (`observer.source`: "mesh", the
     /// default, or "render": a picture of the face through the landmarker).
     pub observer_source: Source,
@@ -112,7 +113,7 @@ pub struct Spec {
     pub table2_normalization: Normalization,
     /// A committed real OpenFace file whose transfer Table 2 reports beside the cohorts
     /// (`table2.openface`, relative to the repository; unset: none).
-    pub table2_openface: Option<String>,
+    pub table2_openface: Option<DataFile>,
     /// The inversion table (`[inversion]`), used when `tables` has "inversion".
     pub inversion: InversionParams,
     /// The head-neck experiment (`[headpose]`), used when `tables` has "headpose".
@@ -124,6 +125,9 @@ pub struct Spec {
     /// Prefix of the paper-table and figure names (`report.prefix`), so a smoke or test run
     /// does not overwrite the committed `paper-tables/table1.md`. Default "".
     pub report_prefix: String,
+    /// Where the checkout's files are: the spec's data files were found with it, and the
+    /// stages find the face, the FACS tables and the photo list with it.
+    pub layout: Layout,
     /// Every value read, with defaults filled in, by dotted key: what `to_toml` writes.
     /// Nothing past the spec layer reads it; stages read the typed fields.
     pub(in crate::spec) values: BTreeMap<String, toml::Value>,
@@ -141,6 +145,7 @@ pub struct Cell {
 struct Reader<'a> {
     tree: &'a BTreeMap<String, Node>,
     file: &'a Path,
+    layout: &'a Layout,
     known: BTreeSet<String>,
     values: BTreeMap<String, toml::Value>,
 }
@@ -163,7 +168,7 @@ impl Spec {
         crate::io::face::FaceSource {
             subdivisions: self.dataset.subdivisions,
             shear_modulus_fraction: Some(self.dataset.shear_modulus_fraction),
-            ..Default::default()
+            ..crate::io::face::FaceSource::of(&self.layout)
         }
     }
 
@@ -262,13 +267,13 @@ impl<'a> Reader<'a> {
         }
     }
 
-    /// A data file's path, relative to the repository (as `experiments/au_calibration.csv`);
-    /// it must exist.
-    fn data_file(&mut self, key: &str, default: &str) -> Result<String, SpecError> {
+    /// A data file, named relative to the repository (as `experiments/au_calibration.csv`),
+    /// found with the layout; it must exist.
+    fn data_file(&mut self, key: &str, default: &str) -> Result<DataFile, SpecError> {
         let value = match self.get(key) {
-            None => default.to_string(),
+            None => self.layout.data_file(default),
             Some(node) => match &node.value {
-                Value::String(s) if crate::io::data_path(s).is_file() => s.clone(),
+                Value::String(s) if self.layout.file(s).is_file() => self.layout.data_file(s),
                 Value::String(s) => {
                     return Err(self.invalid(
                         node,
@@ -286,7 +291,7 @@ impl<'a> Reader<'a> {
             },
         };
         self.values
-            .insert(key.into(), toml::Value::String(value.clone()));
+            .insert(key.into(), toml::Value::String(value.name.clone()));
         Ok(value)
     }
 
@@ -380,10 +385,15 @@ impl<'a> Reader<'a> {
 }
 
 /// Reads one cell's tree.
-pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecError> {
+pub fn resolve(
+    tree: &BTreeMap<String, Node>,
+    file: &Path,
+    layout: &Layout,
+) -> Result<Spec, SpecError> {
     let mut r = Reader {
         tree,
         file,
+        layout,
         known: BTreeSet::new(),
         values: BTreeMap::new(),
     };
@@ -526,6 +536,7 @@ pub fn resolve(tree: &BTreeMap<String, Node>, file: &Path) -> Result<Spec, SpecE
         inversion,
         headpose,
         realfaces,
+        layout: layout.clone(),
         values,
     })
 }

@@ -178,8 +178,7 @@ pub(super) fn read_realfaces(
     r: &mut Reader,
     tables: &[Table],
 ) -> Result<RealfacesParams, SpecError> {
-    let d = RealfacesParams::default();
-    let files = r.data_file("realfaces.files", &d.files)?;
+    let files = r.data_file("realfaces.files", RealfacesParams::DEFAULT_FILES)?;
     let data = match r.get("realfaces.data") {
         None => None,
         Some(node) => match &node.value {
@@ -197,8 +196,7 @@ pub(super) fn read_realfaces(
             }
         },
     };
-    let frame_stride =
-        r.integer("realfaces.frame_stride", d.frame_stride as i64, 1, 100_000)? as usize;
+    let frame_stride = r.integer("realfaces.frame_stride", 1, 1, 100_000)? as usize;
     if !tables.contains(&Table::Realfaces) {
         for key in [
             "realfaces.files",
@@ -208,9 +206,13 @@ pub(super) fn read_realfaces(
             r.forget_if_unset(key);
         }
     }
+    let root = data
+        .as_ref()
+        .map_or_else(|| r.layout.realdata(), std::path::PathBuf::from);
     Ok(RealfacesParams {
         files,
         data,
+        root,
         frame_stride,
     })
 }

@@ -1,5 +1,6 @@
 //! Sweeps: `[sweep]` axes expanded into named cells, each a resolved spec.
 
+use crate::io::Layout;
 use crate::spec::raw::{set_path, Node, Origin, Value};
 use crate::spec::SpecError;
 use std::collections::BTreeMap;
@@ -39,11 +40,15 @@ pub(super) fn sweep_axes(
 
 /// Expands `[sweep]` as a grid (keys in sorted order, values in file order) and resolves each
 /// cell. A sweep key that no stage reads is an unknown key at the sweep's line.
-pub fn cells(mut tree: BTreeMap<String, Node>, file: &Path) -> Result<Vec<Cell>, SpecError> {
+pub fn cells(
+    mut tree: BTreeMap<String, Node>,
+    file: &Path,
+    layout: &Layout,
+) -> Result<Vec<Cell>, SpecError> {
     let Some(sweep) = tree.remove("sweep") else {
         return Ok(vec![Cell {
             name: String::new(),
-            spec: resolve(&tree, file)?,
+            spec: resolve(&tree, file, layout)?,
         }]);
     };
     let mut axes = Vec::new();
@@ -87,7 +92,7 @@ pub fn cells(mut tree: BTreeMap<String, Node>, file: &Path) -> Result<Vec<Cell>,
         }
         out.push(Cell {
             name: name.join(","),
-            spec: resolve(&t, file)?,
+            spec: resolve(&t, file, layout)?,
         });
     }
     Ok(out)

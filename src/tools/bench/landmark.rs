@@ -1,6 +1,7 @@
 //! `facelab bench landmark`: detection, landmarks, fit and observer per frame, and a clip.
 
 use crate::io::face::FaceSource;
+use crate::io::Layout;
 use crate::observe::landmarks;
 use anyhow::{Context, Result};
 use std::io::Write;
@@ -14,13 +15,18 @@ use super::*;
 /// (the committed astronaut photo scaled into it), `frames` times each; then a `seconds`-long
 /// clip at 24 fps of that frame, from frames in memory to AU rows with tracking, as
 /// `observe` runs it.
-pub fn bench_landmark(frames: usize, seconds: f64, out: &mut impl Write) -> Result<()> {
-    use crate::io::calibration::{default_calibration_path, read_calibration};
+pub fn bench_landmark(
+    layout: &Layout,
+    frames: usize,
+    seconds: f64,
+    out: &mut impl Write,
+) -> Result<()> {
+    use crate::io::calibration::read_calibration;
     use crate::landmark::{metric, Landmarker, MeshNetwork, MeshVersion, RgbFrame};
     use crate::observe::model_observer;
     use crate::transfer::pictures::{landmark_frames, openface_rows, InputKind};
 
-    let path = crate::io::data_path("tests/data/landmarker/photos/astronaut.png");
+    let path = layout.file("tests/data/landmarker/photos/astronaut.png");
     let photo = image::open(&path)
         .with_context(|| format!("{}: cannot read the benchmark's photo", path.display()))?
         .to_rgb8();
@@ -30,10 +36,10 @@ pub fn bench_landmark(frames: usize, seconds: f64, out: &mut impl Write) -> Resu
     let frame = RgbFrame::new(640, 360, canvas.into_raw());
 
     let landmarker = Landmarker::new()?;
-    let model = FaceSource::default().model()?;
+    let model = FaceSource::of(layout).model()?;
     let rest = model.rest_state();
     let rest = rest.surface(model.vertex_count()).to_vec();
-    let calibration = read_calibration(&default_calibration_path())?.calibration();
+    let calibration = read_calibration(&layout.calibration())?.calibration();
     let observer = model_observer(&model, calibration.clone())?;
     let time = |f: &mut dyn FnMut() -> Result<()>| -> Result<f64> {
         f()?;

@@ -4,6 +4,7 @@
 //! landmark error against the nonlinear solve. Prints `name value unit` lines. Run it on a
 //! release build.
 
+use crate::io::Layout;
 use std::io::Write;
 use std::time::Instant;
 
@@ -56,15 +57,15 @@ fn landmark_error(a: &[V3], b: &[V3]) -> (f64, f64) {
 
 /// `facelab bench observe`: observing one face (landmarks + 17 AUs), and reading a full
 /// 714-column OpenFace file of `frames` rows written to a temporary folder.
-pub fn bench_observe(frames: usize, out: &mut impl Write) -> Result<()> {
-    use crate::io::calibration::{default_calibration_path, read_calibration};
+pub fn bench_observe(layout: &Layout, frames: usize, out: &mut impl Write) -> Result<()> {
+    use crate::io::calibration::read_calibration;
     use crate::io::openface::{full_header, read_openface};
     use crate::observe::model_observer;
 
-    let source = FaceSource::default();
+    let source = FaceSource::of(layout);
     let model = source.model()?;
     let weights = source.weights()?;
-    let calibration = read_calibration(&default_calibration_path())?.calibration();
+    let calibration = read_calibration(&layout.calibration())?.calibration();
     let observer = model_observer(&model, calibration)?;
     let mut ws = Workspace::new(&model)?;
     let (state, _) = solve_from_rest(
@@ -226,10 +227,15 @@ pub fn bench_train(
 /// `facelab bench transfer`: one frame of transfer (network, solve, observe) on one core, for
 /// the talking-video frames (each solved warm from the previous frame) and the images (each
 /// from rest), taking reference AUs and the network from a run folder with Table 2.
-pub fn bench_transfer(run: &std::path::Path, clips: usize, out: &mut impl Write) -> Result<()> {
+pub fn bench_transfer(
+    layout: &Layout,
+    run: &std::path::Path,
+    clips: usize,
+    out: &mut impl Write,
+) -> Result<()> {
     use crate::cohort::CohortKind;
     use crate::experiments::table2::{clip_ranges, reference_from_csv};
-    use crate::io::calibration::{default_calibration_path, read_calibration};
+    use crate::io::calibration::read_calibration;
     use crate::observe::model_observer;
     use crate::transfer::network::{predict_activations, solve_clip};
     use anyhow::Context;
@@ -245,8 +251,8 @@ pub fn bench_transfer(run: &std::path::Path, clips: usize, out: &mut impl Write)
     let bytes = std::fs::read(run.join("unified.safetensors"))
         .with_context(|| format!("{}: no unified.safetensors", run.display()))?;
     let mlp = crate::learn::Mlp::from_safetensors(&bytes)?;
-    let model = FaceSource::default().model()?;
-    let calibration = read_calibration(&default_calibration_path())?.calibration();
+    let model = FaceSource::of(layout).model()?;
+    let calibration = read_calibration(&layout.calibration())?.calibration();
     let observer = model_observer(&model, calibration)?;
     let params = SolveParams::default();
     let mut ws = Workspace::new(&model)?;

@@ -2,9 +2,10 @@
 
 use facelab::tools::edit::edit_file;
 
+use super::Context;
 use crate::cli::EditArgs;
 
-pub fn run(args: EditArgs) -> anyhow::Result<()> {
+pub fn run(args: EditArgs, _cx: &Context) -> anyhow::Result<()> {
     let written = edit_file(
         &args.curves,
         &args.keys,

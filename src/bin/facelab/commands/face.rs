@@ -1,14 +1,14 @@
 //! `facelab face reach | judge | sweep`: the face's range of motion, what MediaPipe reads on
 //! it, and its validity over every muscle, pair and expression.
 
-use facelab::io::reach::default_reach_path;
 use facelab::judge::{groups, GROUP_LABELS};
 use facelab::tools::face::face_judge;
 use facelab::tools::reach::{write_reach, write_sweep};
 
+use super::Context;
 use crate::cli::FaceCommand;
 
-pub fn run(what: FaceCommand) -> anyhow::Result<()> {
+pub fn run(what: FaceCommand, cx: &Context) -> anyhow::Result<()> {
     match what {
         FaceCommand::Reach {
             face,
@@ -16,9 +16,10 @@ pub fn run(what: FaceCommand) -> anyhow::Result<()> {
             calibration,
             out,
         } => {
-            let table = table.unwrap_or_else(default_reach_path);
+            let table = table.unwrap_or_else(|| cx.layout.reach());
+            let calibration = calibration.unwrap_or_else(|| cx.layout.calibration());
             let (rows, written) =
-                write_reach(&face.source(), &table, calibration.as_deref(), &out)?;
+                write_reach(&face.source(&cx.layout), &table, &calibration, &out)?;
             println!("row\tdisplacement_mm\ttarget_mm\tobserved");
             for r in &rows {
                 let target = r
@@ -41,7 +42,7 @@ pub fn run(what: FaceCommand) -> anyhow::Result<()> {
             }
         }
         FaceCommand::Judge { face, out } => {
-            let (lines, written) = face_judge(&face.source(), &out)?;
+            let (lines, written) = face_judge(&cx.layout, &face.source(&cx.layout), &out)?;
             println!("case\treading\t{}", GROUP_LABELS.join("\t"));
             for l in &lines {
                 let cells: Vec<String> = match &l.scores {
@@ -55,7 +56,7 @@ pub fn run(what: FaceCommand) -> anyhow::Result<()> {
             }
         }
         FaceCommand::Sweep { face, out } => {
-            let lines = write_sweep(&face.source(), &out)?;
+            let lines = write_sweep(&face.source(&cx.layout), &out)?;
             for kind in ["single", "pair", "expression"] {
                 let of_kind: Vec<_> = lines.iter().filter(|l| l.kind == kind).collect();
                 let converged = of_kind.iter().filter(|l| l.converged).count();

@@ -2,10 +2,11 @@
 
 use facelab::tools::face::gallery;
 
+use super::Context;
 use crate::cli::GalleryArgs;
 
-pub fn run(args: GalleryArgs) -> anyhow::Result<()> {
-    let written = gallery(&args.face.source(), &args.out)?;
+pub fn run(args: GalleryArgs, cx: &Context) -> anyhow::Result<()> {
+    let written = gallery(&cx.layout, &args.face.source(&cx.layout), &args.out)?;
     println!("wrote {} images to {}", written.len(), args.out.display());
     Ok(())
 }

@@ -16,9 +16,7 @@ pub mod task;
 pub mod transfer;
 pub mod verify;
 
-use std::path::{Path, PathBuf};
-
-use anyhow::Context;
+use anyhow::Context as _;
 use facelab::transfer::pictures::{LandmarkOutput, PhotoNeutral};
 
 /// Sets the thread counts, once, before any command runs: rayon's pool gets `threads` workers
@@ -57,28 +55,12 @@ pub fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
     Ok(n)
 }
 
-/// A file or folder of the checkout named on the command line (a spec, a run folder): as
-/// given where it exists, else found in the checkout or the binary's built-in copy
-/// ([`facelab::io::data_path`]), so `facelab run experiments/smoke.toml` and the default
-/// `--model results/paper/latest` work from any folder.
-pub fn data_arg(given: PathBuf) -> PathBuf {
-    if given.exists() || given.is_absolute() {
-        return given;
-    }
-    given.to_str().map_or(given.clone(), facelab::io::data_path)
-}
-
-/// The results folder: the default `results` means the checkout's `results/` when the working
-/// folder is inside a checkout (so a run from a subfolder writes where a run from the root
-/// does); anything else is taken as given, relative to the working folder.
-pub fn results_folder(given: PathBuf) -> PathBuf {
-    if given != Path::new("results") {
-        return given;
-    }
-    std::env::current_dir()
-        .ok()
-        .and_then(|d| facelab::io::find_root(&d))
-        .map_or(given, |root| root.join("results"))
+/// What main finds once, before any command runs, and hands each command: where the
+/// checkout's files are, the worker count (already set) and what to print.
+pub struct Context {
+    pub layout: facelab::io::Layout,
+    pub threads: usize,
+    pub verbosity: facelab::run::stage::Verbosity,
 }
 
 /// `--neutral` of a picture input (clap allows only `model` and `median`).

@@ -4,26 +4,25 @@
 use std::path::PathBuf;
 
 use facelab::io::atomic::write_atomic;
-use facelab::io::calibration::default_calibration_path;
 use facelab::io::observer_fit::{read_any_calibration, readout_csv, DEFAULT_READOUT};
 use facelab::tools::observe;
 use facelab::transfer::pictures::landmark_input;
 
-use super::{photo_neutral, print_landmarked};
+use super::{photo_neutral, print_landmarked, Context};
 use crate::cli::ObserveArgs;
 
-pub fn run(args: ObserveArgs) -> anyhow::Result<()> {
+pub fn run(args: ObserveArgs, cx: &Context) -> anyhow::Result<()> {
     let path = args
         .calibration
         .clone()
-        .unwrap_or_else(default_calibration_path);
+        .unwrap_or_else(|| cx.layout.calibration());
     let stdout = &mut std::io::stdout().lock();
     if let Some(input) = &args.input {
         let out = args
             .out
             .as_ref()
             .expect("clap requires --out with an input");
-        let model = args.face.source().model()?;
+        let model = args.face.source(&cx.layout).model()?;
         let l = landmark_input(
             input,
             out,
@@ -54,10 +53,14 @@ pub fn run(args: ObserveArgs) -> anyhow::Result<()> {
     }
     if args.fit {
         let table = observe::load_calibration(&path)?;
-        let root = args.data.unwrap_or_else(observe::default_realdata_root);
+        let root = args.data.unwrap_or_else(|| cx.layout.realdata());
         let out = args.out.unwrap_or_else(|| PathBuf::from(DEFAULT_READOUT));
-        let result =
-            observe::fit_observer(&args.realdata, &root, &args.inputs, &table.calibration())?;
+        let result = observe::fit_observer(
+            &cx.layout.file(&args.realdata),
+            &root,
+            &cx.layout.file(&args.inputs),
+            &table.calibration(),
+        )?;
         let report_path = args.report.join("lopo.csv");
         let report_bytes = observe::report_csv(&result.report);
         let readout_text = readout_csv(&result.readout, &result.provenance);
@@ -67,12 +70,12 @@ pub fn run(args: ObserveArgs) -> anyhow::Result<()> {
         println!("wrote {} and {}", out.display(), report_path.display());
     } else if args.calibrate {
         let table = observe::load_calibration(&path)?;
-        let updated = observe::calibrate(&args.face.source(), &table)?;
+        let updated = observe::calibrate(&args.face.source(&cx.layout), &table)?;
         write_atomic(&path, updated.to_csv().as_bytes())?;
         println!("wrote {}", path.display());
     } else {
         let request = args.pose.request()?;
-        let source = args.face.source();
+        let source = args.face.source(&cx.layout);
         let model = source.model()?;
         let a = request.activations(&source.weights()?)?;
         let observer = facelab::observe::model_observer(&model, read_any_calibration(&path)?)?;

@@ -3,9 +3,10 @@
 use facelab::report::render::{Camera, RenderOptions};
 use facelab::tools::face::render_to;
 
+use super::Context;
 use crate::cli::{RenderArgs, View};
 
-pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+pub fn run(args: RenderArgs, cx: &Context) -> anyhow::Result<()> {
     let request = args.pose.request()?;
     let options = RenderOptions {
         width: args.width,
@@ -16,7 +17,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         },
         muscle_overlay: args.overlay,
     };
-    render_to(&args.face.source(), &request, &options, &args.out)?;
+    render_to(&args.face.source(&cx.layout), &request, &options, &args.out)?;
     println!("wrote {}", args.out.display());
     Ok(())
 }

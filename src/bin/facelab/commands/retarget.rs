@@ -2,10 +2,17 @@
 
 use facelab::tools::edit::retarget;
 
+use super::Context;
 use crate::cli::RetargetArgs;
 
-pub fn run(args: RetargetArgs) -> anyhow::Result<()> {
-    for p in retarget(&args.curves, args.subjects, &args.frames, &args.out)? {
+pub fn run(args: RetargetArgs, cx: &Context) -> anyhow::Result<()> {
+    for p in retarget(
+        &cx.layout,
+        &args.curves,
+        args.subjects,
+        &args.frames,
+        &args.out,
+    )? {
         println!("wrote {}", p.display());
     }
     Ok(())

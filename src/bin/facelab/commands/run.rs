@@ -4,26 +4,23 @@ use facelab::experiments::REGISTRY;
 use facelab::run;
 use facelab::spec::LauncherKind;
 
-use super::{data_arg, results_folder};
+use super::Context;
 use crate::cli::RunArgs;
 
-pub fn run(
-    args: RunArgs,
-    threads: usize,
-    verbosity: facelab::run::stage::Verbosity,
-) -> anyhow::Result<()> {
-    let spec = data_arg(args.spec.spec);
+pub fn run(args: RunArgs, cx: &Context) -> anyhow::Result<()> {
+    let spec = cx.layout.file(args.spec.spec);
     let given = args.launcher.as_deref().and_then(LauncherKind::parse);
     let opts = run::RunOptions {
-        results: results_folder(args.results),
+        results: cx.layout.results(args.results),
         sets: args.spec.sets,
-        threads,
+        threads: cx.threads,
         publish: args.publish,
         assemble: args.assemble,
         registry: REGISTRY,
-        verbosity,
+        verbosity: cx.verbosity,
+        layout: cx.layout.clone(),
     };
-    let kind = run::launcher_of(&spec, &opts.sets, given)?;
+    let kind = run::launcher_of(&cx.layout, &spec, &opts.sets, given)?;
     if kind == LauncherKind::Slurm && opts.assemble.is_none() {
         let l = run::launch(&spec, &opts)?;
         let job = |j: &Option<String>| j.clone().unwrap_or_else(|| "-".into());

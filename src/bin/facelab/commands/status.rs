@@ -3,13 +3,14 @@
 use facelab::experiments::REGISTRY;
 use facelab::run::{self, UnitState};
 
-use super::{data_arg, results_folder};
+use super::Context;
 use crate::cli::StatusArgs;
 
-pub fn run(args: StatusArgs) -> anyhow::Result<()> {
-    let results = results_folder(args.results);
+pub fn run(args: StatusArgs, cx: &Context) -> anyhow::Result<()> {
+    let results = cx.layout.results(args.results);
     let lines = run::status(
-        &data_arg(args.spec.spec),
+        &cx.layout,
+        &cx.layout.file(args.spec.spec),
         &args.spec.sets,
         &results,
         REGISTRY,

@@ -3,9 +3,17 @@
 use facelab::experiments::REGISTRY;
 use facelab::run;
 
+use super::Context;
 use crate::cli::TaskArgs;
 
-pub fn run(args: TaskArgs, verbosity: facelab::run::stage::Verbosity) -> anyhow::Result<()> {
-    run::task(&args.launch, &args.array, args.index, REGISTRY, verbosity)?;
+pub fn run(args: TaskArgs, cx: &Context) -> anyhow::Result<()> {
+    run::task(
+        &cx.layout,
+        &args.launch,
+        &args.array,
+        args.index,
+        REGISTRY,
+        cx.verbosity,
+    )?;
     Ok(())
 }

@@ -6,15 +6,18 @@ use facelab::observe::AU_NAMES;
 use facelab::transfer::network::FLAT_SPREAD;
 use facelab::transfer::{transfer_path, TransferMethod, TransferOptions};
 
-use super::{data_arg, photo_neutral, print_landmarked};
+use super::{photo_neutral, print_landmarked, Context};
 use crate::cli::TransferArgs;
 
-pub fn run(args: TransferArgs) -> anyhow::Result<()> {
+pub fn run(args: TransferArgs, cx: &Context) -> anyhow::Result<()> {
     let input = args
         .input
         .or(args.openface)
         .expect("clap requires an input");
-    let (model, neck) = (data_arg(args.model), args.neck.map(data_arg));
+    let (model, neck) = (
+        cx.layout.file(args.model),
+        args.neck.map(|n| cx.layout.file(n)),
+    );
     let method = TransferMethod::for_input(
         &input,
         args.method
@@ -35,6 +38,7 @@ pub fn run(args: TransferArgs) -> anyhow::Result<()> {
             input_blendshapes: None,
             judge: !args.no_judge,
             fitted: None,
+            layout: cx.layout.clone(),
         },
         args.normalize
             .map(|n| Normalization::parse(&n).expect("clap checked")),

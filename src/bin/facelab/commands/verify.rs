@@ -2,14 +2,17 @@
 
 use facelab::experiments::REGISTRY;
 
+use super::Context;
 use crate::cli::VerifyArgs;
 
-pub fn run(
-    args: VerifyArgs,
-    threads: usize,
-    verbosity: facelab::run::stage::Verbosity,
-) -> anyhow::Result<()> {
-    let differ = facelab::run::verify(&args.run_dir, threads, REGISTRY, verbosity)?;
+pub fn run(args: VerifyArgs, cx: &Context) -> anyhow::Result<()> {
+    let differ = facelab::run::verify(
+        &cx.layout,
+        &args.run_dir,
+        cx.threads,
+        REGISTRY,
+        cx.verbosity,
+    )?;
     if differ.is_empty() {
         println!(
             "{}: every CSV reproduced byte for byte",
