@@ -77,20 +77,7 @@ pub fn train_batch(
         .map_err(at(i))?;
         nets.push(mlp);
     }
-    let layers = nets[0].layers.len();
-    let mut stacked: Vec<(Var, Var)> = Vec::with_capacity(layers);
-    for l in 0..layers {
-        let w: Vec<&Tensor> = nets.iter().map(|m| m.layers[l].0.as_tensor()).collect();
-        let b: Vec<Tensor> = nets
-            .iter()
-            .map(|m| m.layers[l].1.as_tensor().unsqueeze(0))
-            .collect::<Result<_, _>>()
-            .map_err(on)?;
-        stacked.push((
-            Var::from_tensor(&Tensor::stack(&w, 0).map_err(on)?).map_err(on)?,
-            Var::from_tensor(&Tensor::stack(&b, 0).map_err(on)?).map_err(on)?,
-        ));
-    }
+    let stacked = stack(&nets).map_err(on)?;
     let (n, d, o) = (
         jobs[0].train.len(),
         jobs[0].train.inputs,
@@ -191,24 +178,29 @@ pub fn train_batch(
             ));
         }
     }
-    // Each network's weights back into its own layers.
-    for (i, net) in nets.iter_mut().enumerate() {
-        for (l, (w, b)) in stacked.iter().enumerate() {
-            let w = w.as_tensor().get(i).and_then(|t| t.contiguous());
-            let b = b.as_tensor().get(i).and_then(|t| t.squeeze(0));
-            net.layers[l] = (
-                Var::from_tensor(&w.map_err(on)?).map_err(on)?,
-                Var::from_tensor(&b.map_err(on)?).map_err(on)?,
-            );
-        }
-    }
-    let mut out = Vec::with_capacity(k);
+    unstack(&stacked, &mut nets).map_err(on)?;
+    finished(nets, curves, jobs, params.epochs, step)
+}
+
+/// The trained networks with their curves, each checked: the last step may have made its
+/// weights non-finite without a non-finite loss yet.
+fn finished(
+    nets: Vec<Mlp>,
+    curves: Vec<Curves>,
+    jobs: &[Job],
+    epochs: usize,
+    step: usize,
+) -> Result<Vec<(Mlp, Curves)>, BatchError> {
+    let mut out = Vec::with_capacity(nets.len());
     for (i, (net, c)) in nets.into_iter().zip(curves).enumerate() {
-        // The last step may have made the weights non-finite without a non-finite loss yet.
-        let check = net.mse(jobs[i].train).map_err(at(i))?;
+        let at = |error| BatchError {
+            index: Some(i),
+            error,
+        };
+        let check = net.mse(jobs[i].train).map_err(at)?;
         if !check.is_finite() {
-            return Err(at(i)(LearnError::Diverged {
-                epoch: params.epochs,
+            return Err(at(LearnError::Diverged {
+                epoch: epochs,
                 step,
                 loss: check,
             }));
@@ -216,6 +208,36 @@ pub fn train_batch(
         out.push((net, c));
     }
     Ok(out)
+}
+
+/// Each layer's weights and biases of `nets` stacked on a leading axis (networks first).
+fn stack(nets: &[Mlp]) -> candle_core::Result<Vec<(Var, Var)>> {
+    let layers = nets[0].layers.len();
+    let mut stacked: Vec<(Var, Var)> = Vec::with_capacity(layers);
+    for l in 0..layers {
+        let w: Vec<&Tensor> = nets.iter().map(|m| m.layers[l].0.as_tensor()).collect();
+        let b: Vec<Tensor> = nets
+            .iter()
+            .map(|m| m.layers[l].1.as_tensor().unsqueeze(0))
+            .collect::<Result<_, _>>()?;
+        stacked.push((
+            Var::from_tensor(&Tensor::stack(&w, 0)?)?,
+            Var::from_tensor(&Tensor::stack(&b, 0)?)?,
+        ));
+    }
+    Ok(stacked)
+}
+
+/// Each network's weights back from the stacked layers into its own.
+fn unstack(stacked: &[(Var, Var)], nets: &mut [Mlp]) -> candle_core::Result<()> {
+    for (i, net) in nets.iter_mut().enumerate() {
+        for (l, (w, b)) in stacked.iter().enumerate() {
+            let w = w.as_tensor().get(i)?.contiguous()?;
+            let b = b.as_tensor().get(i)?.squeeze(0)?;
+            net.layers[l] = (Var::from_tensor(&w)?, Var::from_tensor(&b)?);
+        }
+    }
+    Ok(())
 }
 
 /// The stacked networks' forward pass on stacked normalized inputs (networks x rows x

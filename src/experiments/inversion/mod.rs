@@ -116,154 +116,201 @@ pub fn run(
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<InvertedFrame>> {
     let chosen = selected(reference, p.frame_stride);
-    // Normalization maps per cohort, over all of its frames (as Table 2).
-    let maps = cohort_maps(reference, training_aus);
+    let cx = Inputs {
+        inverter,
+        base_mesh,
+        face,
+        weights,
+        cohort,
+        calibration,
+        reference,
+        mlp,
+        // Normalization maps per cohort, over all of its frames (as Table 2).
+        maps: cohort_maps(reference, training_aus),
+        p,
+        params,
+        tick,
+    };
     // One job per subject: its model solves its frames, the base model scores the methods.
     let jobs = subject_jobs(reference, &chosen);
     let per_job: Vec<Vec<InvertedFrame>> = jobs
         .par_iter()
-        .map(|(kind, s, frames)| -> Result<Vec<InvertedFrame>> {
-            let subject = Subject::draw(
-                base_mesh,
-                face,
-                weights,
-                &cohort.subjects,
-                cohort.seed,
-                kind.name(),
-                *s,
-            )?;
-            let subject_observer = model_observer(&subject.model, calibration.clone())?;
-            let mut sws = Workspace::new(&subject.model)?;
-            let mut ws = Workspace::new(inverter.model)?;
-            let mut surface = Vec::new();
-            let mut out = Vec::new();
-            for &i in frames {
-                let f = &reference[i];
-                let a = Activations::from_values(&f.activations)?;
-                let (state, _) = solve_from_rest(&subject.model, &a, &mut sws, params)
-                    .with_context(|| format!("inversion: reference frame {i}"))?;
-                let clean = landmarks(state.surface(subject.model.vertex_count()));
-                // One detection, with its noise, for every method; scored against the clean
-                // face.
-                let mut rng = stream(
-                    cohort.seed,
-                    &format!("inversion/detector/{}/{}/{}", kind.name(), s, f.frame),
-                );
-                let sd = p.landmark_noise_sd * subject_observer.iod();
-                let detected: [[f64; 3]; LANDMARK_COUNT] = std::array::from_fn(|k| {
-                    std::array::from_fn(|c| {
-                        clean[k][c] + if sd > 0.0 { sd * rng.normal() } else { 0.0 }
-                    })
-                });
-                let truth = subject_observer.observe(&clean)?.aus;
-                let d_clean = flat(&subject_observer.displacements(&clean)?);
-                let d = flat(&subject_observer.displacements(&detected)?);
-                let r = subject_observer.observe(&detected)?.aus;
-                let mut methods = Vec::new();
-                let score = |name: &str,
-                             a: &Activations,
-                             iterations: usize,
-                             stop: Option<(f64, bool)>,
-                             seconds: f64,
-                             ws: &mut Workspace|
-                 -> Result<Scored> {
-                    let t = Instant::now();
-                    let (aus, disp) = inverter.solve(a, ws, params).with_context(|| {
-                        format!(
-                            "inversion: {} of reference frame {i} ({} subject {}, {:?} frame {})",
-                            name,
-                            f.cohort.name(),
-                            f.subject,
-                            f.expression,
-                            f.frame
-                        )
-                    })?;
-                    Ok(Scored {
-                        aus,
-                        landmark_rms: rms(&disp, &d_clean),
-                        iterations,
-                        stop,
-                        seconds,
-                        solve_seconds: t.elapsed().as_secs_f64(),
-                    })
-                };
-                // The network, both settings.
-                for map in [None, maps.iter().find(|m| m.0 == *kind).map(|m| &m.1)] {
-                    let t = Instant::now();
-                    let a = predict_activations(mlp, map, &[r])?.remove(0);
-                    let name = METHODS[methods.len()];
-                    methods.push(score(
-                        name,
-                        &a,
-                        1,
-                        None,
-                        t.elapsed().as_secs_f64(),
-                        &mut ws,
-                    )?);
-                }
-                // Landmark space: the box, then Choe's linear penalty.
-                for (name, bound) in [
-                    ("landmarks_pg", Bound::Box),
-                    ("landmarks_penalty", Bound::Penalty(p.penalty)),
-                ] {
-                    let t = Instant::now();
-                    let (fit, relative) = inverter.landmarks(&d, bound);
-                    let seconds = t.elapsed().as_secs_f64();
-                    methods.push(score(
-                        name,
-                        &activations(&fit.a),
-                        fit.iterations,
-                        Some((relative, fit.converged)),
-                        seconds,
-                        &mut ws,
-                    )?);
-                }
-                // AU space through the basis, then corrected by the nonlinear face.
-                let t = Instant::now();
-                let start = vec![0.0; inverter.columns.len()];
-                let mut f = |x: &[f64]| inverter.basis_aus(x, &mut surface);
-                let fit = au_fit(&mut f, &r, &start, 1e-4, 1e-4, 30);
-                let basis_seconds = t.elapsed().as_secs_f64();
-                methods.push(score(
-                    "aus_basis",
-                    &activations(&fit.a),
-                    fit.iterations,
-                    Some((fit.gradient_norm, fit.converged)),
-                    basis_seconds,
-                    &mut ws,
-                )?);
-                // Defect correction, keeping the iterate whose nonlinear face is closest.
-                let t = Instant::now();
-                let (x, iterations, stop) = corrected(
-                    inverter,
-                    &fit,
-                    &r,
-                    p.refinements,
-                    &mut ws,
-                    &mut surface,
-                    params,
-                );
-                let seconds = basis_seconds + t.elapsed().as_secs_f64();
-                methods.push(score(
-                    "aus_refined",
-                    &activations(&x),
-                    iterations,
-                    Some(stop),
-                    seconds,
-                    &mut ws,
-                )?);
-                out.push(InvertedFrame {
-                    index: i,
-                    truth,
-                    input_aus: r,
-                    methods,
-                });
-                tick();
-            }
-            Ok(out)
-        })
+        .map(|(kind, s, frames)| invert_subject(&cx, *kind, *s, frames))
         .collect::<Result<_>>()?;
     Ok(per_job.into_iter().flatten().collect())
+}
+
+/// A detection of `clean` landmarks: each coordinate with normal noise of `sd` from the
+/// stream `name` of `seed` (none at `sd = 0`).
+fn detect(
+    clean: &[[f64; 3]; LANDMARK_COUNT],
+    sd: f64,
+    seed: u64,
+    name: &str,
+) -> [[f64; 3]; LANDMARK_COUNT] {
+    let mut rng = stream(seed, name);
+    std::array::from_fn(|k| {
+        std::array::from_fn(|c| clean[k][c] + if sd > 0.0 { sd * rng.normal() } else { 0.0 })
+    })
+}
+
+/// What every subject's inversion reads.
+struct Inputs<'a> {
+    inverter: &'a Inverter<'a>,
+    base_mesh: &'a Mesh,
+    face: FaceParams,
+    weights: &'a ExpressionWeights,
+    cohort: &'a CohortParams,
+    calibration: &'a Calibration,
+    reference: &'a [RefFrame],
+    mlp: &'a Mlp,
+    maps: Vec<(CohortKind, crate::learn::Normalizer)>,
+    p: &'a InversionParams,
+    params: &'a SolveParams,
+    tick: &'a (dyn Fn() + Sync),
+}
+
+/// One subject's frames: drawn, solved and inverted by every method.
+fn invert_subject(
+    cx: &Inputs,
+    kind: CohortKind,
+    s: usize,
+    frames: &[usize],
+) -> Result<Vec<InvertedFrame>> {
+    let subject = Subject::draw(
+        cx.base_mesh,
+        cx.face,
+        cx.weights,
+        &cx.cohort.subjects,
+        cx.cohort.seed,
+        kind.name(),
+        s,
+    )?;
+    let subject_observer = model_observer(&subject.model, cx.calibration.clone())?;
+    let mut sws = Workspace::new(&subject.model)?;
+    let mut ws = Workspace::new(cx.inverter.model)?;
+    let mut surface = Vec::new();
+    let mut out = Vec::new();
+    for &i in frames {
+        let f = &cx.reference[i];
+        let a = Activations::from_values(&f.activations)?;
+        let (state, _) = solve_from_rest(&subject.model, &a, &mut sws, cx.params)
+            .with_context(|| format!("inversion: reference frame {i}"))?;
+        let clean = landmarks(state.surface(subject.model.vertex_count()));
+        // One detection, with its noise, for every method; scored against the clean
+        // face.
+        let detected = detect(
+            &clean,
+            cx.p.landmark_noise_sd * subject_observer.iod(),
+            cx.cohort.seed,
+            &format!("inversion/detector/{}/{}/{}", kind.name(), s, f.frame),
+        );
+        let truth = subject_observer.observe(&clean)?.aus;
+        let d_clean = flat(&subject_observer.displacements(&clean)?);
+        let d = flat(&subject_observer.displacements(&detected)?);
+        let r = subject_observer.observe(&detected)?.aus;
+        let mut methods = Vec::new();
+        let score = |name: &str,
+                     a: &Activations,
+                     iterations: usize,
+                     stop: Option<(f64, bool)>,
+                     seconds: f64,
+                     ws: &mut Workspace|
+         -> Result<Scored> {
+            let t = Instant::now();
+            let (aus, disp) = cx.inverter.solve(a, ws, cx.params).with_context(|| {
+                format!(
+                    "inversion: {} of reference frame {i} ({} subject {}, {:?} frame {})",
+                    name,
+                    f.cohort.name(),
+                    f.subject,
+                    f.expression,
+                    f.frame
+                )
+            })?;
+            Ok(Scored {
+                aus,
+                landmark_rms: rms(&disp, &d_clean),
+                iterations,
+                stop,
+                seconds,
+                solve_seconds: t.elapsed().as_secs_f64(),
+            })
+        };
+        // The network, both settings.
+        for map in [None, cx.maps.iter().find(|m| m.0 == kind).map(|m| &m.1)] {
+            let t = Instant::now();
+            let a = predict_activations(cx.mlp, map, &[r])?.remove(0);
+            let name = METHODS[methods.len()];
+            methods.push(score(
+                name,
+                &a,
+                1,
+                None,
+                t.elapsed().as_secs_f64(),
+                &mut ws,
+            )?);
+        }
+        // Landmark space: the box, then Choe's linear penalty.
+        for (name, bound) in [
+            ("landmarks_pg", Bound::Box),
+            ("landmarks_penalty", Bound::Penalty(cx.p.penalty)),
+        ] {
+            let t = Instant::now();
+            let (fit, relative) = cx.inverter.landmarks(&d, bound);
+            let seconds = t.elapsed().as_secs_f64();
+            methods.push(score(
+                name,
+                &activations(&fit.a),
+                fit.iterations,
+                Some((relative, fit.converged)),
+                seconds,
+                &mut ws,
+            )?);
+        }
+        // AU space through the basis, then corrected by the nonlinear face.
+        let t = Instant::now();
+        let start = vec![0.0; cx.inverter.columns.len()];
+        let mut f = |x: &[f64]| cx.inverter.basis_aus(x, &mut surface);
+        let fit = au_fit(&mut f, &r, &start, 1e-4, 1e-4, 30);
+        let basis_seconds = t.elapsed().as_secs_f64();
+        methods.push(score(
+            "aus_basis",
+            &activations(&fit.a),
+            fit.iterations,
+            Some((fit.gradient_norm, fit.converged)),
+            basis_seconds,
+            &mut ws,
+        )?);
+        // Defect correction, keeping the iterate whose nonlinear face is closest.
+        let t = Instant::now();
+        let (x, iterations, stop) = corrected(
+            cx.inverter,
+            &fit,
+            &r,
+            cx.p.refinements,
+            &mut ws,
+            &mut surface,
+            cx.params,
+        );
+        let seconds = basis_seconds + t.elapsed().as_secs_f64();
+        methods.push(score(
+            "aus_refined",
+            &activations(&x),
+            iterations,
+            Some(stop),
+            seconds,
+            &mut ws,
+        )?);
+        out.push(InvertedFrame {
+            index: i,
+            truth,
+            input_aus: r,
+            methods,
+        });
+        (cx.tick)();
+    }
+    Ok(out)
 }
 
 /// Per cohort, the min-max map of its frames' AUs onto the training data's range (Table 2's

@@ -248,59 +248,68 @@ impl Networks {
     }
 }
 
+/// The data set's faces without the detector's noise, solved in cached chunks.
+fn clean_dataset(
+    spec: &Spec,
+    a: &Assets,
+    k: &Keys,
+    source: &crate::io::face::FaceSource,
+    stages: &mut Stages,
+) -> Result<Samples> {
+    let clean_key = k.clean_dataset.as_ref().unwrap_or(&k.dataset);
+    stages.get_or_compute(&Unit::keyed("dataset", clean_key), |stages| {
+        let model = source.model()?;
+        let reader = FaceReader::new(spec.observer_source)?;
+        let observer = reader.observer(&model, spec_calibration(spec)?)?;
+        let basis = load_basis(k, stages, &model, spec)?;
+        let jobs = dataset::jobs(&spec.dataset);
+        let weights = source.weights()?;
+        let progress = stages.bar(jobs.len() as u64, "dataset");
+        let tick = || progress.inc(1);
+        // Cached in chunks, so a killed run loses at most one chunk of solving; every
+        // sample has its own stream, so the chunks join to the same bytes.
+        let mut samples = Vec::with_capacity(jobs.len());
+        let workspaces = dataset::WorkspacePool::default();
+        for (i, chunk) in jobs.chunks(DATASET_CHUNK).enumerate() {
+            let unit = Unit::new(
+                "dataset_chunk",
+                DATASET_VERSION,
+                &(i, DATASET_CHUNK),
+                &[clean_key],
+            );
+            let before = progress.position();
+            let Samples(part) = stages.get_or_compute(&unit, |_| {
+                Ok(Samples(dataset::generate(
+                    &model,
+                    &weights,
+                    &reader,
+                    &observer,
+                    basis.as_ref(),
+                    &a.facs.au_controls,
+                    &spec.dataset,
+                    spec.dataset.seed,
+                    chunk,
+                    &workspaces,
+                    &tick,
+                )?))
+            })?;
+            // A cached chunk did not tick.
+            let ticked = progress.position() - before;
+            progress.inc(part.len() as u64 - ticked);
+            samples.extend(part);
+        }
+        progress.finish_and_clear();
+        Ok(Samples(samples))
+    })
+}
+
 /// The cell's dataset (its clean faces, then the detector's noise, cached apart so that a
 /// noise sweep solves the faces once) and every (seed, network) trained on it.
 pub(crate) fn networks(spec: &Spec, a: &Assets, k: &Keys, stages: &mut Stages) -> Result<Networks> {
     let source = spec.face_source();
     // Dataset (and the basis it starts from): the clean faces, then the detector's noise,
     // cached apart so that a noise sweep solves the faces once.
-    let clean_key = k.clean_dataset.as_ref().unwrap_or(&k.dataset);
-    let clean = |stages: &mut Stages| {
-        stages.get_or_compute(&Unit::keyed("dataset", clean_key), |stages| {
-            let model = source.model()?;
-            let reader = FaceReader::new(spec.observer_source)?;
-            let observer = reader.observer(&model, spec_calibration(spec)?)?;
-            let basis = load_basis(k, stages, &model, spec)?;
-            let jobs = dataset::jobs(&spec.dataset);
-            let weights = source.weights()?;
-            let progress = stages.bar(jobs.len() as u64, "dataset");
-            let tick = || progress.inc(1);
-            // Cached in chunks, so a killed run loses at most one chunk of solving; every
-            // sample has its own stream, so the chunks join to the same bytes.
-            let mut samples = Vec::with_capacity(jobs.len());
-            let workspaces = dataset::WorkspacePool::default();
-            for (i, chunk) in jobs.chunks(DATASET_CHUNK).enumerate() {
-                let unit = Unit::new(
-                    "dataset_chunk",
-                    DATASET_VERSION,
-                    &(i, DATASET_CHUNK),
-                    &[clean_key],
-                );
-                let before = progress.position();
-                let Samples(part) = stages.get_or_compute(&unit, |_| {
-                    Ok(Samples(dataset::generate(
-                        &model,
-                        &weights,
-                        &reader,
-                        &observer,
-                        basis.as_ref(),
-                        &a.facs.au_controls,
-                        &spec.dataset,
-                        spec.dataset.seed,
-                        chunk,
-                        &workspaces,
-                        &tick,
-                    )?))
-                })?;
-                // A cached chunk did not tick.
-                let ticked = progress.position() - before;
-                progress.inc(part.len() as u64 - ticked);
-                samples.extend(part);
-            }
-            progress.finish_and_clear();
-            Ok(Samples(samples))
-        })
-    };
+    let clean = |stages: &mut Stages| clean_dataset(spec, a, k, &source, stages);
     let Samples(samples) = if k.clean_dataset.is_some() {
         stages.get_or_compute(&Unit::keyed("dataset_noise", &k.dataset), |stages| {
             let Samples(clean) = clean(stages)?;

@@ -384,6 +384,53 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// `tables`: which tables the spec makes (default Table 1 alone).
+fn read_tables(r: &mut Reader) -> Result<Vec<Table>, SpecError> {
+    let mut tables = Vec::new();
+    for node in r.list("tables", vec![toml::Value::String("table1".into())])? {
+        match &node.value {
+            Value::String(s) if Table::parse(s).is_some() => {
+                tables.push(Table::parse(s).expect("checked"))
+            }
+            _ => {
+                return Err(r.invalid(
+                    node,
+                    "tables",
+                    format!(
+                        "may list only {}",
+                        Table::ALL.map(|t| format!("\"{}\"", t.name())).join(", ")
+                    ),
+                ))
+            }
+        }
+    }
+    if tables.is_empty() {
+        tables.push(Table::Table1);
+    }
+    Ok(tables)
+}
+
+/// A table listed without a table whose products it reads is an error at `tables`.
+fn check_needs(r: &mut Reader, tables: &[Table]) -> Result<(), SpecError> {
+    for &t in tables {
+        for need in t.needs() {
+            if let (false, Some(node)) = (tables.contains(need), r.get("tables")) {
+                return Err(r.invalid(
+                    node,
+                    "tables",
+                    format!(
+                        "lists \"{}\" without \"{}\", {}",
+                        t.name(),
+                        need.name(),
+                        t.why()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Reads one cell's tree.
 pub fn resolve(
     tree: &BTreeMap<String, Node>,
@@ -433,27 +480,7 @@ pub fn resolve(
     if seeds.is_empty() {
         seeds.push(1);
     }
-    let mut tables = Vec::new();
-    for node in r.list("tables", vec![toml::Value::String("table1".into())])? {
-        match &node.value {
-            Value::String(s) if Table::parse(s).is_some() => {
-                tables.push(Table::parse(s).expect("checked"))
-            }
-            _ => {
-                return Err(r.invalid(
-                    node,
-                    "tables",
-                    format!(
-                        "may list only {}",
-                        Table::ALL.map(|t| format!("\"{}\"", t.name())).join(", ")
-                    ),
-                ))
-            }
-        }
-    }
-    if tables.is_empty() {
-        tables.push(Table::Table1);
-    }
+    let tables = read_tables(&mut r)?;
 
     let dataset = read_dataset(&mut r)?;
     let observer = ObserverNoise {
@@ -467,22 +494,7 @@ pub fn resolve(
             .expect("choice checked");
     r.forget_if_unset("observer.source");
     let (model, train) = read_training(&mut r)?;
-    for &t in &tables {
-        for need in t.needs() {
-            if let (false, Some(node)) = (tables.contains(need), r.get("tables")) {
-                return Err(r.invalid(
-                    node,
-                    "tables",
-                    format!(
-                        "lists \"{}\" without \"{}\", {}",
-                        t.name(),
-                        need.name(),
-                        t.why()
-                    ),
-                ));
-            }
-        }
-    }
+    check_needs(&mut r, &tables)?;
     let inversion = read_inversion(&mut r)?;
     let headpose = read_headpose(&mut r)?;
     let realfaces = read_realfaces(&mut r, &tables)?;
