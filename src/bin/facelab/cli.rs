@@ -447,7 +447,8 @@ pub enum Bench {
         #[arg(long, default_value_t = SolveParams::default().tolerance)]
         tolerance: f64,
     },
-    /// Training loop speed of the unified network's shape (data in memory).
+    /// Training loop speed of the unified network's shape (data in memory): one network, five
+    /// seeds batched, and the paper's 35 networks as the training stage runs them.
     Train {
         /// Training pairs (random, in memory)
         #[arg(long, default_value_t = 6000)]

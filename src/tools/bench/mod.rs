@@ -9,6 +9,7 @@ use std::io::Write;
 use std::time::Instant;
 
 use anyhow::Result;
+use rayon::prelude::*;
 
 use crate::io::face::FaceSource;
 use crate::observe::landmarks;
@@ -211,6 +212,49 @@ pub fn bench_train(
         "train.batched_per_network",
         batched / SEEDS as f64,
         "s",
+    )?;
+    // The paper's 35 networks as its training stage runs them: per kind (the unified network on
+    // every pair, each expression's on a sixth of them), the five seeds as one batched model,
+    // the kinds side by side on rayon's workers (`--threads`).
+    let kinds: Vec<usize> = std::iter::once(pairs)
+        .chain(std::iter::repeat_n(pairs / 6, 6))
+        .collect();
+    let subsets: Vec<Pairs> = kinds
+        .iter()
+        .map(|&n| Pairs {
+            inputs: 17,
+            outputs: 56,
+            x: data.x[..n * 17].to_vec(),
+            y: data.y[..n * 56].to_vec(),
+        })
+        .collect();
+    let t = Instant::now();
+    subsets
+        .par_iter()
+        .enumerate()
+        .map(|(k, subset)| -> Result<()> {
+            let mut streams: Vec<_> = (0..SEEDS as u64)
+                .map(|s| stream(1 + s, &format!("bench/train/init/{k}")))
+                .collect();
+            let mut sources: Vec<_> = streams.iter_mut().map(|r| move || r.uniform()).collect();
+            let mut jobs: Vec<crate::learn::Job> = sources
+                .iter_mut()
+                .map(|uniform| crate::learn::Job {
+                    train: subset,
+                    test: &empty,
+                    uniform,
+                })
+                .collect();
+            crate::learn::train_batch(&mut jobs, &ModelParams::default(), &params)?;
+            Ok(())
+        })
+        .collect::<Result<Vec<()>>>()?;
+    line(out, "train.paper_35", t.elapsed().as_secs_f64(), "s")?;
+    line(
+        out,
+        "train.threads",
+        rayon::current_num_threads() as f64,
+        "count",
     )?;
     line(out, "train.pairs", pairs as f64, "count")?;
     line(out, "train.epochs", epochs as f64, "count")?;
