@@ -5,7 +5,7 @@
 //!
 //! Modules and what each may use: `docs/architecture.md` (DESIGN 4 as amended), enforced by
 //! `tests/architecture.rs`. Leaves: `rng` (the only source of randomness), `stats`, `cache`,
-//! `invert`. Computation: `sim` (the face and the neck), `observe` (landmarks -> AUs, pose),
+//! `boxqp` (the bounded least-squares solvers). Computation: `sim` (the face and the neck), `observe` (landmarks -> AUs, pose),
 //! `learn` (the MLP), `cohort`, `landmark`, `edit`, `dataset` (the training data),
 //! `headneck` (the learned neck controller), `judge` (MediaPipe's blendshapes on pictures and
 //! faces). Files: `io`. Configuration: `spec`. Output: `report`. The harness, in three rooms:
@@ -16,13 +16,13 @@
 // Small dense matrix algebra reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
+pub mod boxqp;
 pub mod cache;
 pub mod cohort;
 pub mod dataset;
 pub mod edit;
 pub mod experiments;
 pub mod headneck;
-pub mod invert;
 pub mod io;
 pub mod judge;
 pub mod landmark;

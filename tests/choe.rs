@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-use facelab::invert::{accelerated, projected_gradient, projected_newton, Bound, BoxQp};
+use facelab::boxqp::{accelerated, projected_gradient, projected_newton, Bound, BoxQp};
 use facelab::io::calibration::read_calibration;
 use facelab::observe::landmarks;
 use facelab::sim::basis::LinearBasis;

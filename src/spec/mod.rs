@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 pub use raw::Origin;
-pub use resolve::{Cell, LauncherKind, LauncherParams, Spec, Table};
+pub use resolve::{Cell, InversionParams, LauncherKind, LauncherParams, Spec, Table};
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SpecError {

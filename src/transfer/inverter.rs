@@ -5,7 +5,7 @@
 
 use anyhow::Result;
 
-use crate::invert::{accelerated, au_fit, projected_newton, Bound, BoxQp, Solution};
+use crate::boxqp::{accelerated, au_fit, projected_newton, Bound, BoxQp, Solution};
 use crate::observe::model_observer;
 use crate::observe::{landmarks, Calibration, Observer, AU_COUNT, LANDMARK_COUNT};
 use crate::sim::basis::LinearBasis;

@@ -6,7 +6,7 @@
 //! - `landmarks_pg`: landmark-space optimization (Choe eq. 10) over the linear basis, box
 //!   constraints by accelerated projected gradient;
 //! - `landmarks_penalty`: Choe's eq. 10 as published, the box as the linear penalty `c D(a)`,
-//!   solved to convergence by accelerated proximal gradient (`invert::accelerated`);
+//!   solved to convergence by accelerated proximal gradient (`boxqp::accelerated`);
 //! - `aus_basis`: AU-space optimization through the linear basis (projected Gauss-Newton);
 //! - `aus_refined`: `aus_basis` corrected by the nonlinear solve (defect correction: the
 //!   basis' AU error at the current activations is subtracted from the target, and the
@@ -26,12 +26,12 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 
+use crate::boxqp::{au_fit, Bound};
 use crate::cache::Entry;
 use crate::cohort::{CohortKind, CohortParams, Subject};
 use crate::experiments::table2::planned_cohort;
 use crate::experiments::table2::RefFrame;
 use crate::experiments::Products;
-use crate::invert::{au_fit, Bound, InversionParams};
 use crate::learn::{Mlp, Normalization};
 use crate::observe::au::AU_MAX;
 use crate::observe::{landmarks, Calibration, AU_COUNT, LANDMARK_COUNT};
@@ -40,6 +40,7 @@ use crate::run::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::run::stage::{text, Artifact, Stages, Unit};
 use crate::sim::expression::ExpressionWeights;
 use crate::sim::{solve_from_rest, Activations, FaceParams, Mesh, SolveParams, Workspace};
+use crate::spec::InversionParams;
 use crate::spec::Table;
 use crate::transfer::network::{predict_activations, range_map, training_range};
 
@@ -353,7 +354,7 @@ fn subject_jobs(reference: &[RefFrame], chosen: &[usize]) -> Vec<(CohortKind, us
 #[allow(clippy::too_many_arguments)]
 fn corrected(
     inverter: &Inverter,
-    fit: &crate::invert::Solution,
+    fit: &crate::boxqp::Solution,
     r: &[f64; AU_COUNT],
     refinements: usize,
     ws: &mut Workspace,

@@ -2,7 +2,7 @@
 //! QP solved by projected Newton) and the teacher voluntary controller built on it.
 
 use super::*;
-use crate::invert::{projected_newton, BoxQp};
+use crate::boxqp::{projected_newton, BoxQp};
 
 /// The fit's residual weights: per N m of unbalanced joint torque and per radian of skull
 /// orientation error (the posture prior has `posture_weight`, the effort `effort_weight`).

@@ -10,7 +10,6 @@ use crate::cohort::CohortParams;
 use crate::dataset::reader::Source;
 use crate::dataset::{DatasetParams, Family, SolveStart};
 use crate::headneck::HeadposeParams;
-use crate::invert::InversionParams;
 use crate::io::calibration::DEFAULT_CALIBRATION;
 use crate::io::realdata::RealfacesParams;
 use crate::learn::params::{ModelParams, Normalization, TrainParams};
@@ -23,7 +22,7 @@ mod sections;
 mod sweep;
 
 use sections::*;
-pub use sections::{LauncherKind, LauncherParams};
+pub use sections::{InversionParams, LauncherKind, LauncherParams};
 pub use sweep::cells;
 
 /// A table a spec's `tables` can ask for.

@@ -71,6 +71,33 @@ pub(super) fn read_training(r: &mut Reader) -> Result<(ModelParams, TrainParams)
     Ok((model, train))
 }
 
+/// `[inversion]` of a spec.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct InversionParams {
+    /// Every this many video frames is inverted (images: all). Default 3.
+    pub frame_stride: usize,
+    /// Choe's penalty weight c for `landmarks_penalty` (eq. 10, linear penalty, in the units
+    /// of the squared landmark residual, IOD^2). Default 100.
+    pub penalty: f64,
+    /// Nonlinear corrections of `aus_refined`. Default 2.
+    pub refinements: usize,
+    /// Detector noise on every landmark coordinate every method reads (IOD units). Default
+    /// 0.003 (0.19 mm on the model's face), which the observer reads as about the 0.1 AU
+    /// (RMS) of detector noise Table 2's cohorts carry (0.01 IOD made 0.29-0.33 AU).
+    pub landmark_noise_sd: f64,
+}
+
+impl Default for InversionParams {
+    fn default() -> Self {
+        InversionParams {
+            frame_stride: 3,
+            penalty: 100.0,
+            refinements: 2,
+            landmark_noise_sd: 0.003,
+        }
+    }
+}
+
 /// `[inversion]`.
 pub(super) fn read_inversion(r: &mut Reader) -> Result<InversionParams, SpecError> {
     let iv = InversionParams::default();
