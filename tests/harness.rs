@@ -24,6 +24,11 @@ fn run_smoke(results: &Path, extra: &[&str]) -> Output {
     facelab(&args)
 }
 
+/// A committed spec of the checkout (`rel` from its root), resolved as a run would.
+fn committed_spec(rel: &str) -> Vec<spec::Cell> {
+    spec::load(&facelab::io::Layout::here(), &root().join(rel), &[]).unwrap()
+}
+
 fn latest(results: &Path, file: &str) -> Vec<u8> {
     std::fs::read(results.join("smoke/latest").join(file)).unwrap()
 }
@@ -152,56 +157,29 @@ fn spec_errors_name_file_line_column_and_key() {
 #[test]
 fn later_keys_change_nothing_for_specs_that_do_not_set_them() {
     for name in ["paper", "table1", "smoke"] {
-        let cells = spec::load(
-            &facelab::io::Layout::here(),
-            &root().join(format!("experiments/{name}.toml")),
-            &[],
-        )
-        .unwrap();
+        let cells = committed_spec(&format!("experiments/{name}.toml"));
         for later in ["dataset.family", "realfaces."] {
             assert!(!cells[0].spec.records(later), "{name}.toml records {later}");
         }
     }
     // The smoke spec sets none of the later keys; the paper's specs read every face with the
     // readout fitted to OpenFace, and Table 2 adds the committed real file.
-    let smoke = &spec::load(
-        &facelab::io::Layout::here(),
-        &root().join("experiments/smoke.toml"),
-        &[],
-    )
-    .unwrap()[0]
-        .spec;
+    let smoke = &committed_spec("experiments/smoke.toml")[0].spec;
     assert!(!smoke.records("observer.calibration"));
     assert!(!smoke.records("table2.openface"));
     assert_eq!(smoke.table2_openface, None);
-    let paper = &spec::load(
-        &facelab::io::Layout::here(),
-        &root().join("experiments/paper.toml"),
-        &[],
-    )
-    .unwrap()[0]
-        .spec;
+    let paper = &committed_spec("experiments/paper.toml")[0].spec;
     assert_eq!(paper.calibration, "experiments/au_observer_fit.csv");
     assert_eq!(
         paper.table2_openface.as_ref().map(|f| f.name.as_str()),
         Some("assets/openface/py-feat/OpenFace_Test.csv")
     );
-    let cells = spec::load(
-        &facelab::io::Layout::here(),
-        &root().join("experiments/realfaces.toml"),
-        &[],
-    )
-    .unwrap();
+    let cells = committed_spec("experiments/realfaces.toml");
     let s = &cells[0].spec;
     assert_eq!(s.dataset.family, facelab::dataset::Family::Broad);
     assert_eq!(s.calibration, "experiments/au_observer_fit.csv");
     assert!(s.records("realfaces.frame_stride"));
-    let sweep = spec::load(
-        &facelab::io::Layout::here(),
-        &root().join("experiments/ablations/family.toml"),
-        &[],
-    )
-    .unwrap();
+    let sweep = committed_spec("experiments/ablations/family.toml");
     let names: Vec<&str> = sweep.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(
         names,
@@ -248,12 +226,7 @@ fn table2_reports_the_committed_real_file_per_seed_and_setting() {
 
 #[test]
 fn sweeps_expand_into_named_cells() {
-    let cells = spec::load(
-        &facelab::io::Layout::here(),
-        &root().join("experiments/ablations/depth.toml"),
-        &[],
-    )
-    .unwrap();
+    let cells = committed_spec("experiments/ablations/depth.toml");
     assert_eq!(cells.len(), 18);
     assert_eq!(cells[0].name, "model.layers=1,model.width=50");
     assert_eq!(cells[17].spec.model.layers, 6);

@@ -441,12 +441,10 @@ mod tests {
     use crate::io::facs::read_facs;
 
     fn draws(e: Expression, n: usize) -> Vec<(f64, Activations)> {
-        let weights = read_expressions(&crate::io::Layout::here().expressions()).unwrap();
-        let facs = read_facs(
-            &crate::io::Layout::here().facs().0,
-            &crate::io::Layout::here().facs().1,
-        )
-        .unwrap();
+        let layout = crate::io::Layout::here();
+        let weights = read_expressions(&layout.expressions()).unwrap();
+        let (expression_aus, au_muscles) = layout.facs();
+        let facs = read_facs(&expression_aus, &au_muscles).unwrap();
         (0..n)
             .map(|i| {
                 let mut rng = stream(7, &format!("dataset/{e}/{i}"));
@@ -457,12 +455,10 @@ mod tests {
 
     #[test]
     fn detector_noise_is_per_sample_reproducible_and_of_its_stated_size() {
-        let weights = read_expressions(&crate::io::Layout::here().expressions()).unwrap();
-        let facs = read_facs(
-            &crate::io::Layout::here().facs().0,
-            &crate::io::Layout::here().facs().1,
-        )
-        .unwrap();
+        let layout = crate::io::Layout::here();
+        let weights = read_expressions(&layout.expressions()).unwrap();
+        let (expression_aus, au_muscles) = layout.facs();
+        let facs = read_facs(&expression_aus, &au_muscles).unwrap();
         let params = DatasetParams {
             family: Family::Broad,
             ..DatasetParams::default()

@@ -45,10 +45,12 @@ pub struct FaceArgs {
 impl FaceArgs {
     /// The face these arguments name; what they leave out is the layout's.
     pub fn source(&self, layout: &facelab::io::Layout) -> FaceSource {
-        let given = FaceSource::of(layout);
         FaceSource {
-            mesh: self.mesh.clone().unwrap_or(given.mesh),
-            expressions: self.expressions.clone().unwrap_or(given.expressions),
+            mesh: self.mesh.clone().unwrap_or_else(|| layout.mesh()),
+            expressions: self
+                .expressions
+                .clone()
+                .unwrap_or_else(|| layout.expressions()),
             subdivisions: self.subdivisions,
             shear_modulus_fraction: self.shear_modulus_fraction,
         }

@@ -1,6 +1,6 @@
 //! The `facelab` command line: parse the arguments, set what every command shares (verbosity,
-//! the thread counts, the checkout the data files come from), dispatch to the command's file in `commands/`,
-//! print the error chain and exit non-zero on failure.
+//! the thread counts, the checkout the data files come from), dispatch to the command's file
+//! in `commands/`, print the error chain and exit non-zero on failure.
 
 mod cli;
 mod commands;

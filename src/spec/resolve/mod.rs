@@ -272,13 +272,18 @@ impl<'a> Reader<'a> {
         let value = match self.get(key) {
             None => self.layout.data_file(default),
             Some(node) => match &node.value {
-                Value::String(s) if self.layout.file(s).is_file() => self.layout.data_file(s),
                 Value::String(s) => {
-                    return Err(self.invalid(
-                        node,
-                        key,
-                        format!("= \"{s}\": no such file (paths are relative to the repository)"),
-                    ))
+                    let file = self.layout.data_file(s);
+                    if !file.path.is_file() {
+                        return Err(self.invalid(
+                            node,
+                            key,
+                            format!(
+                                "= \"{s}\": no such file (paths are relative to the repository)"
+                            ),
+                        ));
+                    }
+                    file
                 }
                 other => {
                     return Err(self.invalid(

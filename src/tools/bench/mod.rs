@@ -191,20 +191,23 @@ pub fn bench_train(
     // The same network five times (a kind's seeds) as one batched model, each with its own
     // initialization stream: what the run's training stage does per network kind.
     const SEEDS: usize = 5;
-    let mut streams: Vec<_> = (0..SEEDS as u64)
-        .map(|s| stream(1 + s, "bench/train/init"))
-        .collect();
-    let mut sources: Vec<_> = streams.iter_mut().map(|r| move || r.uniform()).collect();
-    let mut jobs: Vec<crate::learn::Job> = sources
-        .iter_mut()
-        .map(|uniform| crate::learn::Job {
-            train: &data,
-            test: &empty,
-            uniform,
-        })
-        .collect();
+    // Five seeds of one network on `pairs` as one batched model, each from its own stream.
+    let seeds = |pairs: &Pairs, name: &str| -> Result<()> {
+        let mut streams: Vec<_> = (0..SEEDS as u64).map(|s| stream(1 + s, name)).collect();
+        let mut sources: Vec<_> = streams.iter_mut().map(|r| move || r.uniform()).collect();
+        let mut jobs: Vec<crate::learn::Job> = sources
+            .iter_mut()
+            .map(|uniform| crate::learn::Job {
+                train: pairs,
+                test: &empty,
+                uniform,
+            })
+            .collect();
+        crate::learn::train_batch(&mut jobs, &ModelParams::default(), &params)?;
+        Ok(())
+    };
     let t = Instant::now();
-    crate::learn::train_batch(&mut jobs, &ModelParams::default(), &params)?;
+    seeds(&data, "bench/train/init")?;
     let batched = t.elapsed().as_secs_f64();
     line(out, "train.batched_5", batched, "s")?;
     line(
@@ -232,22 +235,7 @@ pub fn bench_train(
     subsets
         .par_iter()
         .enumerate()
-        .map(|(k, subset)| -> Result<()> {
-            let mut streams: Vec<_> = (0..SEEDS as u64)
-                .map(|s| stream(1 + s, &format!("bench/train/init/{k}")))
-                .collect();
-            let mut sources: Vec<_> = streams.iter_mut().map(|r| move || r.uniform()).collect();
-            let mut jobs: Vec<crate::learn::Job> = sources
-                .iter_mut()
-                .map(|uniform| crate::learn::Job {
-                    train: subset,
-                    test: &empty,
-                    uniform,
-                })
-                .collect();
-            crate::learn::train_batch(&mut jobs, &ModelParams::default(), &params)?;
-            Ok(())
-        })
+        .map(|(k, subset)| seeds(subset, &format!("bench/train/init/{k}")))
         .collect::<Result<Vec<()>>>()?;
     line(out, "train.paper_35", t.elapsed().as_secs_f64(), "s")?;
     line(

@@ -21,11 +21,11 @@ use facelab::transfer::pictures::{LandmarkOutput, PhotoNeutral};
 
 /// Sets the thread counts, once, before any command runs: rayon's pool gets `threads` workers
 /// (else the Slurm task's cores, else `RAYON_NUM_THREADS` as the caller set it, else all
-/// cores), and candle runs each operation on one thread. candle sizes its matrix products by `RAYON_NUM_THREADS`, which it reads at every
-/// product; facelab runs its parallel work (frames, faces, seeds) on rayon's workers, and a
-/// small network trains fastest on one thread (`bench train`), so the variable is set to 1
-/// here and never changed after. The bytes of every result do not depend on either count.
-/// Returns the worker count.
+/// cores), and candle runs each operation on one thread. candle sizes its matrix products by
+/// `RAYON_NUM_THREADS`, which it reads at every product; facelab runs its parallel work
+/// (frames, faces, seeds) on rayon's workers, and a small network trains fastest on one thread
+/// (`bench train`), so the variable is set to 1 here and never changed after. The bytes of
+/// every result do not depend on either count. Returns the worker count.
 pub fn set_threads(threads: Option<usize>) -> anyhow::Result<usize> {
     let from = |var: &str| {
         std::env::var(var)
