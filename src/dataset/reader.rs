@@ -41,6 +41,16 @@ impl Source {
         }
     }
 
+    /// The renderer's version for faces read through renders, `None` for the mesh: keyed
+    /// beside the source, so a change to what the renderer draws reruns every face read
+    /// through it and leaves the mesh-read ones cached.
+    pub fn renderer(self) -> Option<u32> {
+        match self {
+            Source::Mesh => None,
+            Source::Render => Some(crate::report::render::RENDER_VERSION),
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Source::Mesh => "mesh",
@@ -151,7 +161,10 @@ mod tests {
     /// The render path reads a smile, though weaker than the mesh path does (Face Mesh's
     /// landmarks follow our rendered lip corners only part of the way: under the gains, joy
     /// reads AU12 1.0 by the render against 3.0 by the mesh), rising well above its reading
-    /// of the rest face, and a turned head's pose (17.0 degrees read for 15).
+    /// of the rest face, and a turned head's pose: 19.1 degrees read for 15 (and 14.3 for
+    /// -15). The landmarker's yaw depends on where the ears are: with them 4 cm further
+    /// forward, over the cheek in front of the tragus where no ear is, it read 16.9, so the
+    /// bound is 5 degrees, not the 4 it was then.
     #[test]
     fn render_reads_what_the_mesh_shows() {
         let model = FaceSource::of(&crate::io::Layout::here()).model().unwrap();
@@ -188,7 +201,7 @@ mod tests {
         let turned = reader.read(&model, &state, Some(&head.rotation())).unwrap();
         let seen = rendered.observe(&turned).unwrap();
         assert!(
-            seen.pose.error_degrees(head) < 4.0,
+            seen.pose.error_degrees(head) < 5.0,
             "pose {:?} for yaw 15",
             seen.pose.degrees()
         );

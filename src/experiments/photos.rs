@@ -27,7 +27,7 @@ use crate::judge::{
 };
 use crate::observe::{landmarks, AU_COUNT, AU_NAMES};
 use crate::report::compose::{png_bytes, side_by_side};
-use crate::report::render::{render, RenderOptions};
+use crate::report::render::{render, RenderOptions, RENDER_VERSION};
 use crate::run::cell::{spec_calibration, CellRun, Experiment, Plan};
 use crate::run::stage::{text, Artifact, Unit};
 use crate::sim::basis::LinearBasis;
@@ -43,6 +43,7 @@ use crate::transfer::pictures::{
 // corrected through the nonlinear face (`inversion.refinements` times). 4: the renders' neck
 // runs 6.5 cm below the chin onto shoulders. 5: the landmark fit by projected Newton, its
 // corrections solved warm at a loosened tolerance. 6: the AU-space fit as a third method.
+// (What the renderer draws is in the content: `render::RENDER_VERSION`.)
 const PHOTOS_VERSION: u32 = 6;
 
 /// The transfer methods, in table order.
@@ -112,7 +113,7 @@ pub fn pictures(layout: &Layout) -> Result<Vec<Picture>> {
 fn content(layout: &Layout, pictures: &[Picture], refinements: usize) -> Result<String> {
     let list = layout.file(PHOTOS_LIST);
     let mut content = format!(
-        "list={}\nrefinements={refinements}\n",
+        "list={}\nrefinements={refinements}\nrenderer={RENDER_VERSION}\n",
         cache::sha256(&std::fs::read(&list).with_context(|| list.display().to_string())?)
     );
     for p in pictures {

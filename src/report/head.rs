@@ -8,7 +8,7 @@
 //! vertex; the rasteriser shades them.
 
 use crate::observe::pose::align;
-use crate::sim::geom::{add, cross, lerp, norm, normalize, scale, sub, Rigid, Rot3, V3};
+use crate::sim::geom::{add, cross, dot, lerp, norm, normalize, scale, sub, Rigid, Rot3, V3};
 use crate::sim::model::{FaceModel, State};
 use crate::sim::tissue::SKULL;
 
@@ -219,64 +219,6 @@ fn ellipsoid(centre: V3, axes: V3, rows: usize, colour: impl Fn(V3) -> [f64; 3])
     )
 }
 
-/// Whether `p` lies inside the polygon `outline` seen along z.
-fn inside_outline(p: V3, outline: &[V3]) -> bool {
-    let mut inside = false;
-    let mut j = outline.len() - 1;
-    for i in 0..outline.len() {
-        let (a, b) = (outline[i], outline[j]);
-        if (a[1] > p[1]) != (b[1] > p[1])
-            && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0])
-        {
-            inside = !inside;
-        }
-        j = i;
-    }
-    inside
-}
-
-/// The surface vertex nearest to `p` seen from the front (in x and y).
-fn nearest_vertex(p: V3, surface: &[V3]) -> usize {
-    let d = |q: V3| (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
-    (0..surface.len())
-        .min_by(|&a, &b| d(surface[a]).total_cmp(&d(surface[b])).then(a.cmp(&b)))
-        .unwrap_or(0)
-}
-
-/// Distance from `p` to the polygon `outline` seen along z.
-fn outline_distance(p: V3, outline: &[V3]) -> f64 {
-    let mut best = f64::INFINITY;
-    for i in 0..outline.len() {
-        let (a, b) = (outline[i], outline[(i + 1) % outline.len()]);
-        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-        let len2 = (dx * dx + dy * dy).max(1e-18);
-        let t = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0);
-        best = best.min((p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy));
-    }
-    best
-}
-
-/// `part` with every vertex that lies within the face's outline (seen from the front) kept
-/// behind the nearest face vertex: 4 mm near the outline, where the part meets the face's
-/// edge, and 4 cm deeper than 1 cm inside it, behind the eyeballs and teeth. So the cranium
-/// never shows through the face.
-fn behind_face(mut part: Part, outline: &[V3], surface: &[V3]) -> Part {
-    for p in part.positions.iter_mut() {
-        if !inside_outline(*p, outline) {
-            continue;
-        }
-        let nearest = surface[nearest_vertex(*p, surface)];
-        let depth = if outline_distance(*p, outline) > 0.01 {
-            0.04
-        } else {
-            4e-3
-        };
-        p[2] = p[2].min(nearest[2] - depth);
-    }
-    part.normals = vertex_normals(&part.positions, &part.triangles);
-    part
-}
-
 /// Where an eye looks at rest: the rotation taking `+z` to the direction that puts the iris
 /// centre in front of the middle of the lid opening (its contour's bounding box in the face
 /// plane), so the eye looks straight ahead out of the opening. The eyeball's centre lies 12 mm
@@ -390,8 +332,8 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
     let lower = lower.moved(|p| jaw.apply(p), &jaw.rotation);
     out.push(lower.moved(head, &r));
 
-    // Cranium and hair, fitted to the face's outline: as wide as the face, its front just
-    // behind the forehead's top edge, 19 cm from glabella to the back of the head.
+    // The head around the face: the cranium with its hair, the sides behind the cheeks and the
+    // skin under the jaw, one surface grown from the face's outline.
     let outline: Vec<V3> = model.rig.outer.iter().map(|&v| surface[v]).collect();
     let half_width = outline.iter().map(|p| p[0].abs()).fold(0.0, f64::max);
     let top = outline
@@ -400,64 +342,157 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         .max_by(|a, b| a[1].total_cmp(&b[1]))
         .unwrap_or([0.0; 3]);
     let eyes_y = 0.5 * (model.rig.eyes[0].centre[1] + model.rig.eyes[1].centre[1]);
-    let centre = [0.0, eyes_y + 0.004, top[2] - 0.085];
-    let axes = [0.985 * half_width, 0.115, 0.095];
-    let hairline = top[1] - 0.004;
-    let cranium = ellipsoid(centre, axes, 72, move |p| {
-        // Hair over the top and the back, down to the nape; skin at the temples and face.
-        let back = (centre[2] - p[2]) / axes[2];
-        let line = hairline - 0.075 * back.clamp(0.0, 1.0) - 0.03 * (p[0].abs() / axes[0]).powi(4);
-        // A soft hairline, 6 mm wide, so the coarse grid shows no steps.
-        let t = ((p[1] - line) / 0.006 + 0.5).clamp(0.0, 1.0);
-        let t = t * t * (3.0 - 2.0 * t);
-        std::array::from_fn(|k| SKIN[k] + t * (HAIR[k] - SKIN[k]))
-    });
-    let cranium = behind_face(cranium, &outline, surface);
-    out.push(cranium.moved(head, &r));
-    // The lower head behind the jaw, between the face's lower edge and the neck.
-    let lower_head = ellipsoid(
-        [0.0, eyes_y - 0.06, centre[2] + 0.012],
-        [0.8 * half_width, 0.06, 0.075],
-        32,
-        |_| SKIN,
-    );
-    // It follows the mandible as the face does: each vertex by the jaw weight of the face
-    // vertex nearest to it seen from the front.
-    let lower_head = behind_face(lower_head, &outline, surface);
-    let positions = lower_head
-        .positions
-        .iter()
-        .map(|&p| {
-            let w = model.rig.jaw_weight[nearest_vertex(p, surface)];
-            lerp(p, jaw.apply(p), w)
-        })
-        .collect();
-    let lower_head = Part {
-        positions,
-        ..lower_head
+    let cranium = Cranium {
+        centre: [0.0, eyes_y + 0.004, top[2] - 0.085],
+        axes: [0.985 * half_width, 0.115, 0.095],
+        hairline: top[1] - 0.004,
     };
-    let normals = vertex_normals(&lower_head.positions, &lower_head.triangles);
-    out.push(
-        Part {
-            normals,
-            ..lower_head
-        }
-        .moved(head, &r),
-    );
+    let now = state.surface(n);
+    out.push(hull(model, &cranium, surface, now, &jaw, (&r, t)));
 
-    // Ears: flat ellipsoids beside the head, from brow to nose-base height.
+    // Ears on the sides of the cranium, their centres 2 cm behind the face's edge (the tragus
+    // at the edge), from brow to nose-base height, turned 25 degrees so their backs stand out.
     for side in [-1.0, 1.0] {
-        let c = [
-            side * (half_width + 0.002),
-            eyes_y - 0.006,
-            centre[2] + 0.035,
-        ];
-        let ear = ellipsoid(c, [0.007, 0.031, 0.016], 16, |_| EAR);
+        let (y, z) = (eyes_y - 0.006, cranium.centre[2] - 0.005);
+        let c = [side * (cranium.half_width_at(y, z) + 0.004), y, z];
+        let turn = Rot3::about_axis([0.0, 1.0, 0.0], -side * 25f64.to_radians());
+        let ear = ellipsoid(c, [0.006, 0.031, 0.017], 16, |_| EAR)
+            .moved(|p| add(c, turn.apply(sub(p, c))), &turn);
         out.push(ear.moved(head, &r));
     }
 
     out.push(neck(&outline, eyes_y, head));
     out
+}
+
+/// The ellipsoid the head's surface is shaped on, fitted to the face's outline (as wide as
+/// the face, its front just behind the forehead's top edge, 19 cm from glabella to the back
+/// of the head), and where its hair begins.
+struct Cranium {
+    centre: V3,
+    axes: V3,
+    hairline: f64,
+}
+
+impl Cranium {
+    /// Skin at the face and temples; hair over the top and the back, down to the nape. A soft
+    /// hairline, 10 mm wide, so the grid shows no steps.
+    fn colour(&self, p: V3) -> [f64; 3] {
+        let back = (self.centre[2] - p[2]) / self.axes[2];
+        let line = self.hairline
+            - 0.13 * back.clamp(0.0, 1.0)
+            - 0.03 * (p[0].abs() / self.axes[0]).powi(4);
+        let t = ease((p[1] - line) / 0.01 + 0.5);
+        std::array::from_fn(|k| SKIN[k] + t * (HAIR[k] - SKIN[k]))
+    }
+
+    /// The ellipsoid's half width at height `y` and depth `z` (0 outside it).
+    fn half_width_at(&self, y: f64, z: f64) -> f64 {
+        let (dy, dz) = (
+            (y - self.centre[1]) / self.axes[1],
+            (z - self.centre[2]) / self.axes[2],
+        );
+        self.axes[0] * (1.0 - dy * dy - dz * dz).max(0.0).sqrt()
+    }
+
+    /// The point a fraction `v` of the way from `p` (on the face's outline) to the back of the
+    /// head: along the great circle of the ellipsoid's directions from `p`'s to straight back,
+    /// its distance from the centre (in axis units) easing from `p`'s to the ellipsoid's over
+    /// the first 30% of the way.
+    fn towards_back(&self, p: V3, v: f64) -> V3 {
+        let n: V3 = std::array::from_fn(|k| (p[k] - self.centre[k]) / self.axes[k]);
+        let rho = norm(n);
+        let u = scale(n, 1.0 / rho);
+        let back = [0.0, 0.0, -1.0];
+        let omega = (-u[2]).clamp(-1.0, 1.0).acos();
+        let d = if omega < 1e-9 {
+            u
+        } else {
+            scale(
+                add(
+                    scale(u, ((1.0 - v) * omega).sin()),
+                    scale(back, (v * omega).sin()),
+                ),
+                1.0 / omega.sin(),
+            )
+        };
+        let radius = rho + (1.0 - rho) * ease(v / 0.3);
+        std::array::from_fn(|k| self.centre[k] + self.axes[k] * radius * d[k])
+    }
+}
+
+/// Smoothstep of `t` clamped to [0, 1].
+fn ease(t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// The head around the face, one surface from the face's outline to the back of the head:
+/// over the top from the forehead, round the sides from the temples and cheeks, under the jaw
+/// from the chin to the neck (`Cranium::towards_back`). Its first row is the face's outline as
+/// the face now is, with the face's normals there, so the cranium meets the face without a
+/// seam. Behind the mandible (under the jaw, behind the ramus) it follows the mandible, fully
+/// near the outline and not at all 40% of the way back; the outline's own motion beyond the
+/// mandible's fades over the first 20%.
+fn hull(
+    model: &FaceModel,
+    cranium: &Cranium,
+    rest: &[V3],
+    now: &[V3],
+    jaw: &Rigid,
+    (r, t): (&Rot3, V3),
+) -> Part {
+    // Columns per edge of the outline, and rows from the outline to the back.
+    const SPLIT: usize = 4;
+    const ROWS: usize = 64;
+    let outer = &model.rig.outer;
+    let m = outer.len();
+    let cols = m * SPLIT;
+    let carried = |q: V3, w: f64| add(r.apply(lerp(q, jaw.apply(q), w)), t);
+    let mut part = Part::default();
+    for i in 0..ROWS {
+        let v = i as f64 / (ROWS - 1) as f64;
+        for j in 0..cols {
+            let (a, b) = (outer[j / SPLIT], outer[(j / SPLIT + 1) % m]);
+            let s = (j % SPLIT) as f64 / SPLIT as f64;
+            let edge = lerp(rest[a], rest[b], s);
+            let jaw_weight =
+                model.rig.jaw_weight[a] + s * (model.rig.jaw_weight[b] - model.rig.jaw_weight[a]);
+            let offset = sub(lerp(now[a], now[b], s), carried(edge, jaw_weight));
+            let p = cranium.towards_back(edge, v);
+            let follows = jaw_weight * (1.0 - ease((v - 0.05) / 0.35));
+            part.positions
+                .push(add(carried(p, follows), scale(offset, 1.0 - ease(v / 0.2))));
+            part.colours.push(cranium.colour(p));
+        }
+    }
+    for i in 0..ROWS - 1 {
+        for j in 0..cols {
+            let (a, b) = (i * cols + j, i * cols + (j + 1) % cols);
+            let (c, d) = (b + cols, a + cols);
+            part.triangles.push([a, b, c]);
+            part.triangles.push([a, c, d]);
+        }
+    }
+    part.normals = vertex_normals(&part.positions, &part.triangles);
+    // Outward, whichever way the outline runs.
+    let centre = add(r.apply(cranium.centre), t);
+    let outward: f64 = part
+        .positions
+        .iter()
+        .zip(&part.normals)
+        .map(|(&p, &n)| dot(n, sub(p, centre)))
+        .sum();
+    if outward < 0.0 {
+        part.normals = part.normals.iter().map(|&n| scale(n, -1.0)).collect();
+    }
+    let face_normals = vertex_normals(now, &model.surface.triangles);
+    for j in 0..cols {
+        let (a, b) = (outer[j / SPLIT], outer[(j / SPLIT + 1) % m]);
+        let s = (j % SPLIT) as f64 / SPLIT as f64;
+        part.normals[j] = normalize(lerp(face_normals[a], face_normals[b], s));
+    }
+    part
 }
 
 /// The neck and shoulders: rings from inside the head down, the top ring moved with the head
@@ -473,13 +508,17 @@ fn neck(outline: &[V3], eyes_y: f64, head: impl Fn(V3) -> V3) -> Part {
         .unwrap_or([0.0; 3]);
     // Below the chin the neck runs 6.5 cm, as an adult's front does in a frontal view to the
     // top of the trapezius, then widens over 4.5 cm into the slope of the shoulders (a bust's
-    // base), instead of a cylinder as long as the face.
+    // base), instead of a cylinder as long as the face. It is 12 cm wide and 10.4 cm deep,
+    // its back (the nape) just inside the back of the head where they meet, and leans
+    // forward as it rises (its axis 8.5 degrees from vertical), so the head sits in front of
+    // the shoulders.
     let neck_top = eyes_y - 0.05;
     let flare_top = chin[1] - 0.065;
     let neck_bottom = chin[1] - 0.11;
-    let (neck_half_width, neck_half_depth) = (0.06, 0.062);
+    let (neck_half_width, neck_half_depth) = (0.06, 0.052);
     let (shoulder_half_width, shoulder_half_depth) = (0.17, 0.085);
     let neck_centre_z = chin[2] - 0.055 - neck_half_depth;
+    let lean = 0.15;
     let neck = Part::grid(
         32,
         40,
@@ -487,14 +526,13 @@ fn neck(outline: &[V3], eyes_y: f64, head: impl Fn(V3) -> V3) -> Part {
         |u, v| {
             let phi = u * std::f64::consts::TAU;
             let y = neck_top + v * (neck_bottom - neck_top);
-            let t = ((flare_top - y) / (flare_top - neck_bottom)).clamp(0.0, 1.0);
-            let t = t * t * (3.0 - 2.0 * t);
+            let t = ease((flare_top - y) / (flare_top - neck_bottom));
             let half_width = neck_half_width + t * (shoulder_half_width - neck_half_width);
             let half_depth = neck_half_depth + t * (shoulder_half_depth - neck_half_depth);
             [
                 half_width * phi.cos(),
                 y,
-                neck_centre_z + half_depth * phi.sin(),
+                neck_centre_z - lean * (neck_top - y) + half_depth * phi.sin(),
             ]
         },
         |_, _, _| SKIN,
@@ -505,9 +543,11 @@ fn neck(outline: &[V3], eyes_y: f64, head: impl Fn(V3) -> V3) -> Part {
             .iter()
             .map(|&p| {
                 // The shoulders stay; the neck above them bends toward the head.
-                let w = ((p[1] - flare_top) / (neck_top - flare_top)).clamp(0.0, 1.0);
-                let w = w * w * (3.0 - 2.0 * w);
-                lerp(p, head(p), w)
+                lerp(
+                    p,
+                    head(p),
+                    ease((p[1] - flare_top) / (neck_top - flare_top)),
+                )
             })
             .collect(),
         ..neck

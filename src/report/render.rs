@@ -11,6 +11,14 @@ use crate::sim::tissue::SKULL;
 
 use super::head::{self, SKIN};
 
+/// What the renderer draws, as a version hashed into every cache key whose result reads a
+/// render: the table of renders, the photo table, and every face read through renders
+/// (`observer.source = "render"`, through `Source::renderer`). Bump it when a render of the
+/// same face changes.
+// 2: the head is one surface grown from the face's outline (no seam at the cranium, skin under
+// the jaw that follows it), ears behind the face's edge, a neck 10.4 cm deep that leans forward.
+pub const RENDER_VERSION: u32 = 2;
+
 /// Look-at perspective camera (metres, degrees).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {

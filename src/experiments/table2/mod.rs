@@ -41,8 +41,9 @@ pub use report::{bars, csv, frames_csv, markdown, sweep_figure, sweep_markdown, 
 const COHORT_VERSION: u32 = 3;
 const TRANSFER_VERSION: u32 = 2;
 // 3: renders show eyeballs, teeth, brows, lips and the head on a neck. 4: the neck runs
-// 6.5 cm below the chin onto shoulders.
-const RENDERS_VERSION: u32 = 4;
+// 6.5 cm below the chin onto shoulders. 5: the renderer's own version is in the key
+// (`render::RENDER_VERSION`), so what it draws no longer needs a bump here.
+const RENDERS_VERSION: u32 = 5;
 
 /// What Table 2 needs from the rest of the cell.
 pub struct Inputs<'a> {
@@ -226,6 +227,8 @@ struct CohortInputs<'a> {
     data: &'a str,
     cohort: &'a crate::cohort::CohortParams,
     source: crate::dataset::reader::Source,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    renderer: Option<u32>,
     settings: cell::FaceSettings,
 }
 
@@ -237,6 +240,7 @@ pub fn cohort_unit(spec: &Spec, face: &str, data: &str) -> Unit {
         data,
         cohort: &spec.cohort,
         source: spec.observer_source,
+        renderer: spec.observer_source.renderer(),
         settings: cell::FaceSettings::of(&spec.dataset),
     };
     Unit::new("cohort", COHORT_VERSION, &inputs, &[])
@@ -273,7 +277,12 @@ pub fn transfer_unit(
 
 /// The renders of the first seed's transfers.
 pub fn renders_unit(first_transfer_key: &str) -> Unit {
-    Unit::new("renders", RENDERS_VERSION, &(), &[first_transfer_key])
+    Unit::new(
+        "renders",
+        RENDERS_VERSION,
+        &crate::report::render::RENDER_VERSION,
+        &[first_transfer_key],
+    )
 }
 
 pub fn run(inp: &Inputs, stages: &mut Stages) -> Result<Table2Result> {

@@ -51,6 +51,8 @@ struct DatasetInputs<'a> {
     observer: ObserverNoise,
     calibration: &'a str,
     source: Source,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    renderer: Option<u32>,
 }
 
 pub(crate) fn file_hash(path: &Path) -> Result<String> {
@@ -85,8 +87,8 @@ pub(crate) fn spec_calibration(spec: &Spec) -> Result<Calibration> {
 
 /// The face's code version, hashed with the mesh into the face every stage solves (the basis,
 /// the dataset and the cohorts, and through them every stage after them). Bump it when the
-/// muscles, the tissue or the solver move the equilibria, or when the renderer draws a face
-/// differently (what `observer.source = "render"` reads).
+/// muscles, the tissue or the solver move the equilibria. What the renderer draws has its own
+/// version (`render::RENDER_VERSION`), keyed only where a result reads a render.
 // 1: zygomaticus major widens a maximal smile by 46% (from 28%), levator labii superioris at
 // 46 N; the eyes look out of the middle of their lid openings; the neck's front lies 5.5 cm
 // behind the chin.
@@ -152,6 +154,7 @@ pub(crate) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
             observer,
             calibration: &spec.calibration.name,
             source: spec.observer_source,
+            renderer: spec.observer_source.renderer(),
         };
         let basis: Vec<&str> = basis.iter().map(String::as_str).collect();
         Unit::new("dataset", DATASET_VERSION, &inputs, &basis).key
