@@ -235,13 +235,15 @@ fn a_sweep_on_slurm_gives_the_local_bytes_and_resubmits_only_what_is_missing() {
             return;
         }
     };
-    // Two cells (epochs) x two seeds of the smoke spec, one CPU per task.
+    // Two cells (epochs) x two seeds of the smoke spec, one CPU per task; Tables 1 and 2,
+    // whose units are split between the cells and the seeds arrays (the inversion's would
+    // add a unit to each cell task and nothing to the split).
     let spec = dir.join("sweep.toml");
     std::fs::write(
         &spec,
         format!(
-            "extends = \"{}\"\nexperiment = \"slurm_sweep\"\n\n[sweep]\n\"train.epochs\" = [4, 5]\n\n\
-             [launcher]\ncpus_per_task = 1\n",
+            "extends = \"{}\"\nexperiment = \"slurm_sweep\"\ntables = [\"table1\", \"table2\"]\n\n\
+             [sweep]\n\"train.epochs\" = [4, 5]\n\n[launcher]\ncpus_per_task = 1\n",
             root().join("experiments/smoke.toml").display()
         ),
     )
@@ -330,7 +332,9 @@ fn a_sweep_on_slurm_gives_the_local_bytes_and_resubmits_only_what_is_missing() {
     let a = dir.join("local/results/slurm_sweep/latest");
     let b = experiment.join("latest");
     let files = outputs(&a);
-    assert!(files.len() >= 15, "{files:?}");
+    // The sweep's summary and, per cell, Table 1's (table1, curves), Table 2's (table2,
+    // reference, frames) and its spec.
+    assert_eq!(files.len(), 1 + 2 * 6, "{files:?}");
     assert_eq!(files, outputs(&b));
     let names: Vec<&str> = files.iter().map(String::as_str).collect();
     assert_same_bytes(&a, &b, &names, "the local and the Slurm run");

@@ -32,23 +32,30 @@ fn coefficient(index: usize, value: f64) -> f64 {
 }
 
 impl LinearBasis {
-    /// Solves the model once per control at full activation (slide, twist at 1.0).
+    /// Solves the model once per control at full activation (slide, twist at 1.0), the
+    /// controls side by side on rayon's threads, each with its own workspace: every solve
+    /// starts from rest, so the fields do not depend on the thread count.
     pub fn build(model: &FaceModel, params: &SolveParams) -> Result<LinearBasis, SolveError> {
+        use rayon::prelude::*;
         let rest = model.tissue.rest.clone();
-        let mut ws = Workspace::new(model)?;
-        let mut fields = Vec::with_capacity(AUXILIARY);
-        for index in 0..AUXILIARY {
-            let mut a = Activations::neutral();
-            a.set_index(index, 1.0).expect("1.0 is in range");
-            let (state, _) = solve_from_rest(model, &a, &mut ws, params)?;
-            let field = state
-                .positions
-                .iter()
-                .zip(&rest)
-                .flat_map(|(p, r)| [p[0] - r[0], p[1] - r[1], p[2] - r[2]])
-                .collect();
-            fields.push(field);
-        }
+        let fields = (0..AUXILIARY)
+            .into_par_iter()
+            .map_init(
+                || Workspace::new(model),
+                |ws, index| {
+                    let ws = ws.as_mut().map_err(|e| e.clone())?;
+                    let mut a = Activations::neutral();
+                    a.set_index(index, 1.0).expect("1.0 is in range");
+                    let (state, _) = solve_from_rest(model, &a, ws, params)?;
+                    Ok(state
+                        .positions
+                        .iter()
+                        .zip(&rest)
+                        .flat_map(|(p, r)| [p[0] - r[0], p[1] - r[1], p[2] - r[2]])
+                        .collect())
+                },
+            )
+            .collect::<Result<Vec<Vec<f64>>, SolveError>>()?;
         Ok(LinearBasis {
             vertex_count: model.vertex_count(),
             rest,
