@@ -190,6 +190,31 @@ fn edit_command_meets_keys_and_names_bad_ones() {
     }
 }
 
+/// A frame the warm solve cannot reach (on subject 1, frame 15's equilibrium carried to frame
+/// 16's activations inverts a prism) is solved again from rest, as a transfer's frames are,
+/// instead of ending the retarget: it used to stop with "subject 1: frame 16: the activation
+/// path could not be followed".
+#[test]
+fn retarget_solves_a_frame_from_rest_where_the_warm_start_inverts() {
+    let dir = crate::temp("choe", "retarget");
+    let curves = crate::root().join("tests/data/retarget/warm_start_inverts.csv");
+    let o = facelab(&[
+        "retarget",
+        "--curves",
+        curves.to_str().unwrap(),
+        "--subjects",
+        "2",
+        "--frames",
+        "16",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let grid = image::open(dir.join("retarget.png")).unwrap();
+    assert!(grid.width() > 3 * 240, "{}", grid.width());
+    assert!(dir.join("retarget.gif").exists());
+}
+
 /// Where the basis' prediction of a strong expression inverts prisms, `solve_predicted`
 /// starts from the prediction of a fraction of it and continues along the ray from neutral:
 /// it reaches the equilibrium the solve from rest reaches, within the landmark slack of the

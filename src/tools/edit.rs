@@ -110,7 +110,7 @@ pub fn retarget(
     use crate::cohort::{CohortKind, Subject};
     use crate::report::compose::{gif_bytes, labelled_grid, png_bytes};
     use crate::report::render::{render, RenderOptions};
-    use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
+    use crate::sim::{solve, solve_from_rest, Activations, SolveParams, State, Workspace};
     use rayon::prelude::*;
 
     let curves = read_curves(input)?;
@@ -157,20 +157,36 @@ pub fn retarget(
         ..RenderOptions::default()
     };
     let params = SolveParams::default();
-    // Per face: every frame rendered (the sequence solved warm, frame to frame).
+    // Per face: every frame rendered, the sequence solved warm from frame to frame; a frame
+    // the warm solve cannot reach (a subject's face whose previous state, carried to the new
+    // jaw, inverts a prism) is solved again from rest, as a transfer's frames are.
     let renders: Vec<Vec<image::RgbImage>> = faces
         .par_iter()
         .map(|(name, model)| -> Result<Vec<image::RgbImage>> {
             let mut ws = Workspace::new(model)?;
             let mut out = Vec::with_capacity(sequence.len());
-            let mut state = solve_from_rest(model, &sequence[0], &mut ws, &params)
-                .with_context(|| format!("{name}: frame {}", curves.frames[0]))?
-                .0;
-            out.push(render(model, &state, &cell));
-            for (a, f) in sequence.iter().zip(&curves.frames).skip(1) {
-                solve(model, a, &mut state, &mut ws, &params)
-                    .with_context(|| format!("{name}: frame {f}"))?;
-                out.push(render(model, &state, &cell));
+            let failures = crate::transfer::solve_clip_tolerant(
+                &sequence,
+                |_, a, last: Option<&State>, ws| {
+                    Ok(match last {
+                        Some(previous) => {
+                            let mut state = previous.clone();
+                            solve(model, a, &mut state, ws, &params)?;
+                            state
+                        }
+                        None => solve_from_rest(model, a, ws, &params)?.0,
+                    })
+                },
+                &mut ws,
+                |_, state| {
+                    if let Some(state) = state {
+                        out.push(render(model, state, &cell));
+                    }
+                    Ok(())
+                },
+            )?;
+            if let Some((i, why)) = failures.first() {
+                bail!("{name}: frame {}: {why}", curves.frames[*i]);
             }
             Ok(out)
         })
