@@ -156,7 +156,13 @@ pub(crate) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
             source: spec.observer_source,
             renderer: spec.observer_source.renderer(),
         };
-        let basis: Vec<&str> = basis.iter().map(String::as_str).collect();
+        // The data set reads the basis only to start its solves from its predictions; from
+        // rest its faces are the same whether or not another table builds a basis.
+        let basis: Vec<&str> = basis
+            .iter()
+            .filter(|_| d.start == SolveStart::Predicted)
+            .map(String::as_str)
+            .collect();
         Unit::new("dataset", DATASET_VERSION, &inputs, &basis).key
     };
     let dataset = dataset_key(spec.observer);

@@ -6,6 +6,7 @@
 
 use crate::cache::Entry;
 use crate::dataset::reader::FaceReader;
+use crate::dataset::SolveStart;
 use crate::dataset::{self, Sample};
 use crate::io::facs::FacsMaps;
 use crate::io::rows::{self, num, CsvRow};
@@ -261,7 +262,10 @@ fn clean_dataset(
         let model = source.model()?;
         let reader = FaceReader::new(spec.observer_source)?;
         let observer = reader.observer(&model, spec_calibration(spec)?)?;
-        let basis = load_basis(k, stages, &model, spec)?;
+        let basis = match spec.dataset.start {
+            SolveStart::Predicted => load_basis(k, stages, &model, spec)?,
+            SolveStart::Rest => None,
+        };
         let jobs = dataset::jobs(&spec.dataset);
         let weights = source.weights()?;
         let progress = stages.bar(jobs.len() as u64, "dataset");
