@@ -13,7 +13,7 @@ use crate::observe::landmarks;
 use crate::rng::{stream, Stream};
 use crate::sim::controls::{muscle_index, JAW_ROTATION, MUSCLE_COUNT};
 use crate::sim::expression::{Expression, ExpressionWeights};
-use crate::sim::geom::V3;
+use crate::sim::geom::{smoothstep, V3};
 use crate::sim::mesh::Mesh;
 use crate::sim::muscles::{MuscleKind, Side, MUSCLE_PAIRS};
 use crate::sim::{Activations, FaceModel, FaceParams, ModelError};
@@ -106,11 +106,6 @@ fn anchors(base: &Mesh) -> Anchors {
         mouth: mean(48..68),
         chin_y: l[8][1],
     }
-}
-
-fn smoothstep(t: f64) -> f64 {
-    let t = t.clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
 }
 
 fn gauss(d: f64, sigma: f64) -> f64 {

@@ -8,7 +8,9 @@
 //! vertex; the rasteriser shades them.
 
 use crate::observe::pose::align;
-use crate::sim::geom::{add, cross, dot, lerp, norm, normalize, scale, sub, Rigid, Rot3, V3};
+use crate::sim::geom::{
+    add, cross, dot, lerp, norm, normalize, scale, smoothstep, sub, Rigid, Rot3, V3,
+};
 use crate::sim::model::{FaceModel, State};
 use crate::sim::tissue::SKULL;
 
@@ -290,8 +292,9 @@ pub fn iris_points(model: &FaceModel, state: &State) -> [V3; 10] {
     out
 }
 
-/// Every part for `state`, moved with the head (and the mandible).
-pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
+/// Every part for `state`, moved with the head (and the mandible); `face_normals` are the
+/// skin's vertex normals in `state`, which the head's surface takes at the face's edge.
+pub fn parts(model: &FaceModel, state: &State, face_normals: &[V3]) -> Vec<Part> {
     let n = model.vertex_count();
     let rest = model.rest_state();
     let surface = rest.surface(n);
@@ -348,7 +351,13 @@ pub fn parts(model: &FaceModel, state: &State) -> Vec<Part> {
         hairline: top[1] - 0.004,
     };
     let now = state.surface(n);
-    out.push(hull(model, &cranium, surface, now, &jaw, (&r, t)));
+    out.push(hull(
+        model,
+        &cranium,
+        (surface, now, face_normals),
+        &jaw,
+        (&r, t),
+    ));
 
     // Ears on the sides of the cranium, their centres 2 cm behind the face's edge (the tragus
     // at the edge), from brow to nose-base height, turned 25 degrees so their backs stand out.
@@ -382,7 +391,7 @@ impl Cranium {
         let line = self.hairline
             - 0.13 * back.clamp(0.0, 1.0)
             - 0.03 * (p[0].abs() / self.axes[0]).powi(4);
-        let t = ease((p[1] - line) / 0.01 + 0.5);
+        let t = smoothstep((p[1] - line) / 0.01 + 0.5);
         std::array::from_fn(|k| SKIN[k] + t * (HAIR[k] - SKIN[k]))
     }
 
@@ -416,15 +425,9 @@ impl Cranium {
                 1.0 / omega.sin(),
             )
         };
-        let radius = rho + (1.0 - rho) * ease(v / 0.3);
+        let radius = rho + (1.0 - rho) * smoothstep(v / 0.3);
         std::array::from_fn(|k| self.centre[k] + self.axes[k] * radius * d[k])
     }
-}
-
-/// Smoothstep of `t` clamped to [0, 1].
-fn ease(t: f64) -> f64 {
-    let t = t.clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
 }
 
 /// The head around the face, one surface from the face's outline to the back of the head:
@@ -437,8 +440,7 @@ fn ease(t: f64) -> f64 {
 fn hull(
     model: &FaceModel,
     cranium: &Cranium,
-    rest: &[V3],
-    now: &[V3],
+    (rest, now, face_normals): (&[V3], &[V3], &[V3]),
     jaw: &Rigid,
     (r, t): (&Rot3, V3),
 ) -> Part {
@@ -448,21 +450,33 @@ fn hull(
     let outer = &model.rig.outer;
     let m = outer.len();
     let cols = m * SPLIT;
+    // Column `j`: its outline edge's two vertices and how far along the edge it lies.
+    let column = |j: usize| {
+        (
+            outer[j / SPLIT],
+            outer[(j / SPLIT + 1) % m],
+            (j % SPLIT) as f64 / SPLIT as f64,
+        )
+    };
+    let along = |values: &[f64], j: usize| {
+        let (a, b, s) = column(j);
+        values[a] + s * (values[b] - values[a])
+    };
     let carried = |q: V3, w: f64| add(r.apply(lerp(q, jaw.apply(q), w)), t);
     let mut part = Part::default();
     for i in 0..ROWS {
         let v = i as f64 / (ROWS - 1) as f64;
         for j in 0..cols {
-            let (a, b) = (outer[j / SPLIT], outer[(j / SPLIT + 1) % m]);
-            let s = (j % SPLIT) as f64 / SPLIT as f64;
+            let (a, b, s) = column(j);
             let edge = lerp(rest[a], rest[b], s);
-            let jaw_weight =
-                model.rig.jaw_weight[a] + s * (model.rig.jaw_weight[b] - model.rig.jaw_weight[a]);
+            let jaw_weight = along(&model.rig.jaw_weight, j);
             let offset = sub(lerp(now[a], now[b], s), carried(edge, jaw_weight));
             let p = cranium.towards_back(edge, v);
-            let follows = jaw_weight * (1.0 - ease((v - 0.05) / 0.35));
-            part.positions
-                .push(add(carried(p, follows), scale(offset, 1.0 - ease(v / 0.2))));
+            let follows = jaw_weight * (1.0 - smoothstep((v - 0.05) / 0.35));
+            part.positions.push(add(
+                carried(p, follows),
+                scale(offset, 1.0 - smoothstep(v / 0.2)),
+            ));
             part.colours.push(cranium.colour(p));
         }
     }
@@ -486,10 +500,8 @@ fn hull(
     if outward < 0.0 {
         part.normals = part.normals.iter().map(|&n| scale(n, -1.0)).collect();
     }
-    let face_normals = vertex_normals(now, &model.surface.triangles);
     for j in 0..cols {
-        let (a, b) = (outer[j / SPLIT], outer[(j / SPLIT + 1) % m]);
-        let s = (j % SPLIT) as f64 / SPLIT as f64;
+        let (a, b, s) = column(j);
         part.normals[j] = normalize(lerp(face_normals[a], face_normals[b], s));
     }
     part
@@ -526,7 +538,7 @@ fn neck(outline: &[V3], eyes_y: f64, head: impl Fn(V3) -> V3) -> Part {
         |u, v| {
             let phi = u * std::f64::consts::TAU;
             let y = neck_top + v * (neck_bottom - neck_top);
-            let t = ease((flare_top - y) / (flare_top - neck_bottom));
+            let t = smoothstep((flare_top - y) / (flare_top - neck_bottom));
             let half_width = neck_half_width + t * (shoulder_half_width - neck_half_width);
             let half_depth = neck_half_depth + t * (shoulder_half_depth - neck_half_depth);
             [
@@ -546,7 +558,7 @@ fn neck(outline: &[V3], eyes_y: f64, head: impl Fn(V3) -> V3) -> Part {
                 lerp(
                     p,
                     head(p),
-                    ease((p[1] - flare_top) / (neck_top - flare_top)),
+                    smoothstep((p[1] - flare_top) / (neck_top - flare_top)),
                 )
             })
             .collect(),

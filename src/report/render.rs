@@ -343,7 +343,7 @@ pub fn render(model: &FaceModel, state: &State, options: &RenderOptions) -> RgbI
             [*colour; 3],
         );
     }
-    for part in head::parts(model, state) {
+    for part in head::parts(model, state, &normals) {
         for t in &part.triangles {
             target.triangle(
                 &proj,

@@ -55,6 +55,12 @@ pub fn lerp(a: V3, b: V3, t: f64) -> V3 {
     add(a, scale(sub(b, a), t))
 }
 
+/// Smoothstep of `t` clamped to [0, 1]: 0 below, 1 above, with zero slope at both ends.
+pub fn smoothstep(t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
 /// Signed volume of the tetrahedron (a, b, c, d): positive when (b-a, c-a, d-a) is right-handed.
 #[inline]
 pub fn tet_volume(a: V3, b: V3, c: V3, d: V3) -> f64 {
