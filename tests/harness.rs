@@ -45,6 +45,45 @@ fn spec_error(text: &str, sets: &[&str]) -> String {
     }
 }
 
+/// `dataset.grid` adds the grid of equilibria to a paper-family data set solved from
+/// predictions, and changes its key; without it (the default), and for the broad family, the
+/// plan is what it was before the grid.
+#[test]
+fn the_grid_of_equilibria_is_planned_only_where_it_is_asked_for() {
+    let results = temp("grid-plan");
+    let status = |sets: &[&str]| -> String {
+        let mut args = vec!["status", "experiments/table1.toml"];
+        for s in sets {
+            args.extend(["--set", s]);
+        }
+        let results = results.display().to_string();
+        args.extend(["--results", &results]);
+        let out = facelab(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let dataset = |plan: &str| -> String {
+        let line = plan
+            .lines()
+            .find(|l| l.ends_with(" dataset"))
+            .expect("a dataset");
+        line.split_whitespace().nth(1).unwrap().to_string()
+    };
+    let default = status(&[]);
+    let grid = status(&["dataset.grid=4"]);
+    let broad = status(&["dataset.grid=4", "dataset.family=\"broad\""]);
+    let broad_default = status(&["dataset.family=\"broad\""]);
+    assert!(!default.contains(" grid\n"), "{default}");
+    assert!(grid.contains(" grid\n"), "{grid}");
+    assert!(!broad.contains(" grid\n"), "{broad}");
+    assert_ne!(dataset(&default), dataset(&grid));
+    assert_eq!(dataset(&broad), dataset(&broad_default));
+}
+
 #[test]
 fn spec_errors_name_file_line_column_and_key() {
     let e = spec_error(
@@ -82,6 +121,11 @@ fn spec_errors_name_file_line_column_and_key() {
         e.contains("s.toml:2:1")
             && e.contains("dataset.shear_modulus_fraction")
             && e.contains(">= 0"),
+        "{e}"
+    );
+    let e = spec_error("[dataset]\ngrid = 2\n", &[]);
+    assert!(
+        e.contains("s.toml:2:1") && e.contains("dataset.grid") && e.contains("4 faces per axis"),
         "{e}"
     );
     let e = spec_error("[dataset]\nfamily = \"wide\"\n", &[]);

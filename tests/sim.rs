@@ -195,3 +195,69 @@ fn warm_solve_through_a_buckled_path_converges() {
     assert!(r <= params.tolerance, "residual {r:e}");
     assert_eq!(state.activations, samples[20]);
 }
+
+/// The grid of the paper family's equilibria (`sim::grid`, `dataset.grid`): a face between
+/// its grid faces starts from their cubic interpolation a fraction of a millimetre from its
+/// equilibrium, and Newton's method from there reaches the equilibrium the solve from rest
+/// reaches, within the landmark slack of the tolerance (`bench solve`: under 0.1 mm), in a
+/// few iterations, where the linear basis' start takes over ten. Surprise, whose face has one
+/// equilibrium wherever `bench solve` looked; where there are two (joy's and anger's lips),
+/// the grid may start near the other (docs/performance.md).
+#[test]
+fn a_face_solved_from_the_grid_is_the_face_solved_from_rest() {
+    use facelab::sim::grid::ExpressionGrid;
+    use facelab::sim::solver::solve_from_grid;
+    let model = model();
+    let weights = read_expressions(&facelab::io::Layout::here().expressions()).unwrap();
+    let params = SolveParams::default();
+    let e = Expression::Surprise;
+    let grid = ExpressionGrid::build(model, &weights, &[e], 3, &params).unwrap();
+    let mut ws = Workspace::new(model).unwrap();
+    let apart = |a: &[V3], b: &State| {
+        a.iter()
+            .zip(surface(b))
+            .map(|(&p, &q)| norm(sub(p, q)))
+            .fold(0.0, f64::max)
+    };
+    let n = model.vertex_count();
+    let mut iterations = 0;
+    let draws = [(0.8, 0.1), (0.55, 0.45), (0.2, 0.9), (1.0, 0.7)];
+    for (s, jaw) in draws {
+        let a = weights.sample(e, s, jaw);
+        let (rest, _) = solve_from_rest(model, &a, &mut ws, &params).unwrap();
+        let start = apart(&grid.predict(e, s, jaw).unwrap()[..n], &rest);
+        let (solved, report) =
+            solve_from_grid(model, &grid, None, (e, s, jaw), &a, &mut ws, &params).unwrap();
+        let end = apart(surface(&solved), &rest);
+        println!(
+            "{e} s = {s}, jaw = {jaw}: start {:.4} mm away, {} iterations, {:.4} mm from rest's",
+            start * 1e3,
+            report.iterations,
+            end * 1e3
+        );
+        assert!(start < 1e-3, "the start is {:.3} mm away", start * 1e3);
+        assert!(end < 1e-4, "s = {s}, jaw = {jaw}: {:.3} mm away", end * 1e3);
+        assert!(residual(model, &solved, &mut ws) <= params.tolerance);
+        iterations += report.iterations;
+    }
+    assert!(iterations <= 5 * draws.len(), "{iterations} iterations");
+    // A grid face is its own equilibrium: no iteration at all. A grid without the
+    // expression hands the solve to the fallback (here from rest).
+    let at = (1.0 / 3.0, 2.0 / 3.0);
+    let a = weights.sample(e, at.0, at.1);
+    let (_, report) =
+        solve_from_grid(model, &grid, None, (e, at.0, at.1), &a, &mut ws, &params).unwrap();
+    assert_eq!(report.iterations, 0);
+    let joy = weights.sample(Expression::Joy, 0.5, 0.5);
+    let (_, report) = solve_from_grid(
+        model,
+        &grid,
+        None,
+        (Expression::Joy, 0.5, 0.5),
+        &joy,
+        &mut ws,
+        &params,
+    )
+    .unwrap();
+    assert!(report.pieces >= params.continuation_steps, "{report:?}");
+}

@@ -98,6 +98,13 @@ pub struct DatasetParams {
     /// Seed of the samples' streams; separate from the training seeds so that every seed
     /// trains on the same, once-simulated pairs. Default 1.
     pub seed: u64,
+    /// Intervals along s and along the jaw of a grid of equilibria (`sim::grid`) that a
+    /// paper-family data set solved from predictions starts from; 0 (the default) for none:
+    /// the linear basis' prediction alone. A grid of 4 makes the faces about 7 times faster
+    /// (`bench solve`: 3 Newton iterations a face, against 17), but where the face has two
+    /// stable equilibria (joy's and anger's lips) it lands on the other one more often than
+    /// the basis' start does (docs/performance.md), so it is not the default.
+    pub grid: usize,
 }
 
 impl Default for DatasetParams {
@@ -112,6 +119,7 @@ impl Default for DatasetParams {
             start: SolveStart::Predicted,
             family: Family::Paper,
             seed: 1,
+            grid: 0,
         }
     }
 }
@@ -130,8 +138,9 @@ use crate::sim::controls::{
     control_index, muscle_index, CONTROL_COUNT, JAW_ROTATION, JAW_SLIDE, JAW_TWIST, MUSCLE_COUNT,
 };
 use crate::sim::expression::{Expression, ExpressionWeights};
+use crate::sim::grid::ExpressionGrid;
 use crate::sim::muscles::{Side, MUSCLE_PAIRS};
-use crate::sim::solver::solve_predicted;
+use crate::sim::solver::{solve_from_grid, solve_predicted};
 use crate::sim::{solve_from_rest, Activations, FaceModel, SolveParams, Workspace};
 use reader::FaceReader;
 
@@ -158,6 +167,14 @@ impl CsvRow for Sample {
     }
 }
 
+/// Where a data set's solves start besides rest: the grid of the paper family's equilibria
+/// (its faces), the linear basis' prediction (any face, and where the grid's start fails).
+#[derive(Clone, Copy, Default)]
+pub struct Starts<'a> {
+    pub basis: Option<&'a LinearBasis>,
+    pub grid: Option<&'a ExpressionGrid>,
+}
+
 /// Generates `params.pairs_per_expression` pairs per expression, read without detector noise
 /// (see [`add_noise`]). Each sample draws from its own stream (`dataset/<expression>/<index>`),
 /// so the result does not depend on how rayon splits the work. `au_controls` (per AU, the
@@ -169,7 +186,7 @@ pub fn generate(
     weights: &ExpressionWeights,
     reader: &FaceReader,
     observer: &Observer,
-    basis: Option<&LinearBasis>,
+    starts: Starts,
     au_controls: &[Vec<usize>],
     params: &DatasetParams,
     seed: u64,
@@ -189,8 +206,14 @@ pub fn generate(
                 let mut rng = stream(seed, &format!("dataset/{e}/{index}"));
                 let (scale, a) = draw(params.family, weights, au_controls, e, &mut rng);
                 let jaw = a.get(JAW_ROTATION);
-                let state = match (params.start, basis) {
-                    (SolveStart::Predicted, Some(b)) => solve_predicted(model, b, &a, ws, &solve),
+                let paper = (e, scale, jaw);
+                let state = match (params.start, starts.grid, starts.basis) {
+                    (SolveStart::Predicted, Some(g), b) if params.family == Family::Paper => {
+                        solve_from_grid(model, g, b, paper, &a, ws, &solve)
+                    }
+                    (SolveStart::Predicted, _, Some(b)) => {
+                        solve_predicted(model, b, &a, ws, &solve)
+                    }
                     _ => solve_from_rest(model, &a, ws, &solve),
                 }
                 .map(|(s, _)| s)

@@ -7,6 +7,7 @@ pub mod basis;
 pub mod controls;
 pub mod expression;
 pub mod geom;
+pub mod grid;
 pub mod lips;
 pub mod mesh;
 pub mod model;

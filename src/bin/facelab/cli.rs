@@ -448,6 +448,10 @@ pub enum Bench {
         /// Relative residual at which a solve has converged
         #[arg(long, default_value_t = SolveParams::default().tolerance)]
         tolerance: f64,
+        /// Intervals of the grid of equilibria to start the samples from (`dataset.grid`;
+        /// 0 = none, else 3 or more), measured at subdivision 0
+        #[arg(long, default_value_t = 4)]
+        grid: usize,
     },
     /// Training loop speed of the unified network's shape (data in memory): one network, five
     /// seeds batched, and the paper's 35 networks as the training stage runs them.

@@ -17,7 +17,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use std::path::Path;
 
-use super::{BASIS_VERSION, DATASET_VERSION};
+use super::{BASIS_VERSION, DATASET_VERSION, GRID_VERSION};
 
 /// The face settings every solve reads: the basis, the dataset and the cohorts hash them.
 #[derive(Serialize)]
@@ -112,6 +112,8 @@ pub(crate) fn assets(layout: &Layout) -> Result<Assets> {
 /// Cache keys of a cell's stages.
 pub(crate) struct Keys {
     pub(crate) basis: Option<String>,
+    /// The grid of equilibria a paper-family data set solved from predictions starts from.
+    pub(crate) grid: Option<String>,
     pub(crate) dataset: String,
     /// The faces without detector noise, where the spec's observer adds noise.
     pub(crate) clean_dataset: Option<String>,
@@ -137,6 +139,20 @@ pub(crate) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
         let face = (a.face.as_str(), FaceSettings::of(&spec.dataset));
         Unit::new("basis", BASIS_VERSION, &face, &[]).key
     });
+    // A paper-family data set starts from the grid's interpolated equilibria (the basis
+    // where they fail); other families, and `dataset.grid = 0`, from the basis alone, so
+    // their keys stay what they were before the grid.
+    let d = &spec.dataset;
+    let grid =
+        (d.start == SolveStart::Predicted && d.family == Family::Paper && d.grid > 0).then(|| {
+            let inputs = (
+                a.face.as_str(),
+                FaceSettings::of(d),
+                a.expressions.as_str(),
+                d.grid,
+            );
+            Unit::new("grid", GRID_VERSION, &inputs, &[]).key
+        });
     // The faces are read without detector noise and cached under the key of the spec with
     // the noise off; a noisy data set is cached under its own key, made from the clean one
     // (`dataset::add_noise`), so a noise sweep solves the faces once.
@@ -158,18 +174,20 @@ pub(crate) fn keys(spec: &Spec, a: &Assets) -> Result<Keys> {
         };
         // The data set reads the basis only to start its solves from its predictions; from
         // rest its faces are the same whether or not another table builds a basis.
-        let basis: Vec<&str> = basis
+        let starts: Vec<&str> = basis
             .iter()
             .filter(|_| d.start == SolveStart::Predicted)
+            .chain(&grid)
             .map(String::as_str)
             .collect();
-        Unit::new("dataset", DATASET_VERSION, &inputs, &basis).key
+        Unit::new("dataset", DATASET_VERSION, &inputs, &starts).key
     };
     let dataset = dataset_key(spec.observer);
     let clean_dataset = (!spec.observer.is_off()).then(|| dataset_key(ObserverNoise::default()));
     let train = train_keys(spec, &a.facs_hash, &dataset);
     Ok(Keys {
         basis,
+        grid,
         dataset,
         clean_dataset,
         train,

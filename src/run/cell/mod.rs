@@ -36,6 +36,9 @@ pub(crate) use networks::{curves_csv, Networks, Trained};
 // solver's tolerance, reached by other iterates, so other bits (and every stage after it).
 pub(crate) const BASIS_VERSION: u32 = 2;
 pub(crate) const DATASET_VERSION: u32 = 3;
+// The grid of the paper family's equilibria the data set starts its solves from
+// (`sim::grid`); its key is an input of a paper-family data set's key.
+pub(crate) const GRID_VERSION: u32 = 1;
 pub(crate) const TRAIN_VERSION: u32 = 1;
 
 /// The experiments a run may hold, in the order a cell runs them
@@ -371,6 +374,9 @@ impl<'a> Plan<'a> {
         if let Some(k) = plan.keys.take() {
             if let Some(b) = &k.basis {
                 plan.add("basis", Unit::keyed("basis", b));
+            }
+            if let Some(g) = &k.grid {
+                plan.add("grid", Unit::keyed("grid", g));
             }
             match &k.clean_dataset {
                 Some(clean) => {

@@ -19,6 +19,8 @@
 
 use super::basis::LinearBasis;
 use super::controls::Activations;
+use super::expression::Expression;
+use super::grid::ExpressionGrid;
 use super::model::{FaceModel, State};
 
 mod diagnostics;
@@ -202,26 +204,9 @@ pub fn solve_predicted(
         } else {
             target.scaled_from_neutral(t)
         };
-        let pose = model.pose(&a);
-        let mut positions = basis.predict(&a);
-        for (node, p) in positions.iter_mut().enumerate() {
-            if !model.free[node] {
-                *p = pose.fixed[node];
-            }
-        }
-        let mut state = State {
-            positions,
-            activations: a,
-        };
-        let mut report = match newton(
-            model,
-            &pose,
-            &mut state,
-            ws,
-            params,
-            Curvature::SemiDefinite,
-        ) {
-            Ok(report) => report,
+        let positions = basis.predict(&a);
+        let (mut state, mut report) = match solve_from_guess(model, a, positions, ws, params) {
+            Ok(solved) => solved,
             Err(SolveError::NotConverged { iterations, .. }) => {
                 spent += iterations;
                 continue;
@@ -249,6 +234,78 @@ pub fn solve_predicted(
         return Ok((state, report));
     }
     let (state, mut report) = solve_from_rest(model, target, ws, params)?;
+    report.iterations += spent;
+    Ok((state, report))
+}
+
+/// Newton's method for `target` from `guess` (every node's position; the fixed nodes are put
+/// where `target`'s pose holds them), with no continuation: for a guess near the equilibrium,
+/// such as the linear basis' or the grid's prediction.
+pub fn solve_from_guess(
+    model: &FaceModel,
+    target: Activations,
+    mut guess: Vec<crate::sim::geom::V3>,
+    ws: &mut Workspace,
+    params: &SolveParams,
+) -> Result<(State, SolveReport), SolveError> {
+    let pose = model.pose(&target);
+    for (node, p) in guess.iter_mut().enumerate() {
+        if !model.free[node] {
+            *p = pose.fixed[node];
+        }
+    }
+    let mut state = State {
+        positions: guess,
+        activations: target,
+    };
+    let report = newton(
+        model,
+        &pose,
+        &mut state,
+        ws,
+        params,
+        Curvature::SemiDefinite,
+    )?;
+    Ok((state, report))
+}
+
+/// Solves a paper-family face (`w_e s` plus the jaw, `target`) from the grid's prediction of
+/// its equilibrium; where Newton does not converge from there, by continuation from the
+/// nearest grid face; where that fails too (or the grid lacks `e`), as [`solve_predicted`]
+/// does with `basis`, or from rest without one. The report's iterations include the failed
+/// attempts.
+pub fn solve_from_grid(
+    model: &FaceModel,
+    grid: &ExpressionGrid,
+    basis: Option<&LinearBasis>,
+    (e, s, jaw): (Expression, f64, f64),
+    target: &Activations,
+    ws: &mut Workspace,
+    params: &SolveParams,
+) -> Result<(State, SolveReport), SolveError> {
+    let mut spent = 0;
+    if let Some(guess) = grid.predict(e, s, jaw) {
+        match solve_from_guess(model, target.clone(), guess, ws, params) {
+            Ok(solved) => return Ok(solved),
+            Err(SolveError::NotConverged { iterations, .. }) => spent += iterations,
+            Err(_) => {}
+        }
+    }
+    // The grid face nearest to the target, continued to it: a short path.
+    if let Some(mut state) = grid.nearest(e, s, jaw) {
+        match solve(model, target, &mut state, ws, params) {
+            Ok(mut report) => {
+                report.iterations += spent;
+                return Ok((state, report));
+            }
+            Err(SolveError::NotConverged { iterations, .. }) => spent += iterations,
+            Err(_) => {}
+        }
+    }
+    let (state, mut report) = match basis {
+        Some(b) => solve_predicted(model, b, target, ws, params)?,
+        None => solve_from_rest(model, target, ws, params)?,
+    };
     report.iterations += spent;
     Ok((state, report))
 }

@@ -42,8 +42,23 @@ pub(super) fn read_dataset(r: &mut Reader) -> Result<DatasetParams, SpecError> {
         family: Family::parse(&r.choice("dataset.family", d.family.name(), &Family::NAMES)?)
             .expect("choice checked"),
         seed: r.integer("dataset.seed", d.seed as i64, 0, i64::MAX)? as u64,
+        grid: r.integer("dataset.grid", d.grid as i64, 0, 16)? as usize,
     };
+    if (1..3).contains(&dataset.grid) {
+        if let Some(node) = r.get("dataset.grid") {
+            return Err(r.invalid(
+                node,
+                "dataset.grid",
+                format!(
+                    "= {} is too coarse: the grid's cubics need 4 faces per axis (3 or more \
+                     intervals), or 0 for none",
+                    dataset.grid
+                ),
+            ));
+        }
+    }
     r.forget_if_unset("dataset.family");
+    r.forget_if_unset("dataset.grid");
     Ok(dataset)
 }
 

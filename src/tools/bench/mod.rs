@@ -29,13 +29,21 @@ pub use solve::bench_solve;
 /// Random expression activations as the dataset stage draws them: a random expression,
 /// s ~ U[0, 1], jaw rotation ~ U[0, 1].
 pub fn random_samples(weights: &ExpressionWeights, seed: u64, count: usize) -> Vec<Activations> {
+    random_draws(seed, count)
+        .into_iter()
+        .map(|(e, s, jaw)| weights.sample(e, s, jaw))
+        .collect()
+}
+
+/// The paper family's `(expression, s, jaw)` of [`random_samples`].
+pub fn random_draws(seed: u64, count: usize) -> Vec<(Expression, f64, f64)> {
     let mut rng = stream(seed, "bench/solve/samples");
     (0..count)
         .map(|_| {
             let e = Expression::ALL[rng.index(6)];
             let s = rng.uniform();
             let jaw = rng.uniform();
-            weights.sample(e, s, jaw)
+            (e, s, jaw)
         })
         .collect()
 }

@@ -2,7 +2,11 @@
 
 use crate::io::face::FaceSource;
 use crate::sim::basis::LinearBasis;
-use crate::sim::solver::{iteration_cost, softest_mode, solve_predicted, SoftMode};
+use crate::sim::expression::Expression;
+use crate::sim::grid::ExpressionGrid;
+use crate::sim::solver::{
+    iteration_cost, softest_mode, solve_from_grid, solve_predicted, SoftMode,
+};
 use crate::sim::{solve, solve_from_rest, Activations, SolveParams, Workspace};
 use crate::stats::median;
 use anyhow::Result;
@@ -11,14 +15,21 @@ use std::time::Instant;
 
 use super::*;
 
+#[allow(clippy::too_many_arguments)]
 pub fn bench_solve(
     source: &FaceSource,
     levels: &[u8],
     samples: usize,
     seed: u64,
+    grid_steps: usize,
     params: &SolveParams,
     out: &mut impl Write,
 ) -> Result<()> {
+    if (1..3).contains(&grid_steps) {
+        anyhow::bail!(
+            "--grid {grid_steps}: the grid's cubics need 3 or more intervals (0 for none)"
+        );
+    }
     let weights = source.weights()?;
     let params = *params;
     for &level in levels {
@@ -307,6 +318,68 @@ pub fn bench_solve(
                 chain_off as f64,
                 "count",
             )?;
+        }
+
+        // The grid's interpolated equilibria as starts (`dataset.grid`), at subdivision 0:
+        // speed, and how many faces end on another equilibrium than the solve from rest's
+        // (over 0.01 mm, the tolerance's slack; over 0.1 mm, another equilibrium), against
+        // the basis' start.
+        if level == 0 && grid_steps > 0 {
+            let g = format!("solve.grid{grid_steps}.sub0");
+            let t = Instant::now();
+            let grid =
+                ExpressionGrid::build(&model, &weights, &Expression::ALL, grid_steps, &params)?;
+            line(out, &format!("{g}.build_s"), t.elapsed().as_secs_f64(), "s")?;
+            let mut iterations = Vec::with_capacity(count);
+            let mut solved = Vec::with_capacity(count);
+            let t = Instant::now();
+            for (&draw, a) in random_draws(seed, count).iter().zip(&batch) {
+                let (state, r) =
+                    solve_from_grid(&model, &grid, Some(&basis), draw, a, &mut ws, &params)?;
+                iterations.push(r.iterations as f64);
+                solved.push(state);
+            }
+            let ms = t.elapsed().as_secs_f64() * 1e3 / count as f64;
+            line(out, &format!("{g}.ms_per_sample"), ms, "ms")?;
+            line(
+                out,
+                &format!("{g}.iterations_per_sample"),
+                iterations.iter().sum::<f64>() / count as f64,
+                "count",
+            )?;
+            line(
+                out,
+                &format!("{g}.iterations_median"),
+                median(&mut iterations),
+                "count",
+            )?;
+            for (name, faces) in [("grid", &solved), ("predicted", &predicted_states)] {
+                let apart: Vec<f64> = faces
+                    .iter()
+                    .zip(&states)
+                    .map(|(a, b)| landmark_error(a.surface(n), b.surface(n)).1)
+                    .collect();
+                let over = |mm: f64| apart.iter().filter(|&&d| d > mm * 1e-3).count() as f64;
+                line(
+                    out,
+                    &format!("{g}.{name}_vs_cold_over_0.01_mm"),
+                    over(0.01),
+                    "count",
+                )?;
+                line(
+                    out,
+                    &format!("{g}.{name}_vs_cold_over_0.1_mm"),
+                    over(0.1),
+                    "count",
+                )?;
+                let max = apart.iter().copied().fold(0.0, f64::max);
+                line(
+                    out,
+                    &format!("{g}.{name}_vs_cold_landmark_max_mm"),
+                    max * 1e3,
+                    "mm",
+                )?;
+            }
         }
 
         let mut apart = 0.0f64;

@@ -33,11 +33,13 @@ pub fn run(what: Bench, cx: &Context) -> anyhow::Result<()> {
             seed,
             levels,
             tolerance,
+            grid,
         } => bench_solve(
             &face.source(&cx.layout),
             &levels,
             samples,
             seed,
+            grid,
             &SolveParams {
                 tolerance,
                 ..SolveParams::default()
