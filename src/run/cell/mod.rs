@@ -24,6 +24,7 @@ use crate::spec::Spec;
 
 pub(crate) mod keys;
 pub(crate) mod networks;
+pub(crate) mod starts;
 
 pub(crate) use keys::{assets, keys, spec_calibration, Assets, FaceSettings, Keys};
 pub(crate) use networks::{curves_csv, Networks, Trained};
@@ -213,7 +214,7 @@ impl<'a> CellRun<'a> {
         let (k, model, spec) = (self.keys()?, self.model()?, self.spec);
         let mut stages = Stages::new(self.cache, self.cell, self.records, self.verbosity);
         once(&mut self.basis, || {
-            networks::load_basis(&k, &mut stages, &model, spec)
+            starts::load_basis(&k, &mut stages, &model, spec)
         })
     }
 
