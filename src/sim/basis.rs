@@ -31,6 +31,16 @@ fn coefficient(index: usize, value: f64) -> f64 {
     }
 }
 
+/// Every node's displacement from `rest`, flattened xyz: a field of the basis, or of the
+/// grid of equilibria (`sim::grid`).
+pub(crate) fn displacement(positions: &[V3], rest: &[V3]) -> Vec<f64> {
+    positions
+        .iter()
+        .zip(rest)
+        .flat_map(|(p, r)| [p[0] - r[0], p[1] - r[1], p[2] - r[2]])
+        .collect()
+}
+
 impl LinearBasis {
     /// Solves the model once per control at full activation (slide, twist at 1.0), the
     /// controls side by side on rayon's threads, each with its own workspace: every solve
@@ -47,12 +57,7 @@ impl LinearBasis {
                     let mut a = Activations::neutral();
                     a.set_index(index, 1.0).expect("1.0 is in range");
                     let (state, _) = solve_from_rest(model, &a, ws, params)?;
-                    Ok(state
-                        .positions
-                        .iter()
-                        .zip(&rest)
-                        .flat_map(|(p, r)| [p[0] - r[0], p[1] - r[1], p[2] - r[2]])
-                        .collect())
+                    Ok(displacement(&state.positions, &rest))
                 },
             )
             .collect::<Result<Vec<Vec<f64>>, SolveError>>()?;

@@ -10,6 +10,7 @@
 //! (`solver::solve_from_grid`). Each grid face is solved from rest, so the grid is a function
 //! of the model, the weights and the tolerance alone.
 
+use super::basis::displacement;
 use super::controls::Activations;
 use super::expression::{Expression, ExpressionWeights};
 use super::geom::V3;
@@ -136,14 +137,6 @@ impl ExpressionGrid {
             activations: self.activations[x][index].clone(),
         })
     }
-}
-
-fn displacement(positions: &[V3], rest: &[V3]) -> Vec<f64> {
-    positions
-        .iter()
-        .zip(rest)
-        .flat_map(|(p, r)| [p[0] - r[0], p[1] - r[1], p[2] - r[2]])
-        .collect()
 }
 
 /// Lagrange weights at `t` in [0, 1] of the 4 grid nodes (of `steps + 1`) nearest to it, the
