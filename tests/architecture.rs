@@ -80,7 +80,6 @@ const ALLOWED: &[(&str, &[&str])] = &[
 /// Which modules may name each external crate directly.
 const EXTERNAL: &[(&str, &[&str])] = &[
     ("toml", &["spec"]),
-    ("polars", &["io"]),
     ("plotters", &["report"]),
     ("candle_core", &["learn", "landmark"]),
     ("candle_nn", &["learn"]),

@@ -80,10 +80,10 @@ fn header_variants_read_the_same_values() {
 #[test]
 fn our_writer_round_trips_byte_for_byte() {
     let file = parse(&v22()).unwrap();
-    let bytes = openface_bytes(&file.rows).unwrap();
+    let bytes = openface_bytes(&file.rows);
     let again = parse_openface(bytes.clone(), Path::new("ours.csv")).unwrap();
     assert_eq!(again.rows.len(), 2);
-    assert_eq!(openface_bytes(&again.rows).unwrap(), bytes);
+    assert_eq!(openface_bytes(&again.rows), bytes);
     assert_eq!(again.rows[1].aus, file.rows[1].aus);
 }
 
@@ -117,7 +117,7 @@ fn rows_made_in_memory_read_as_their_written_file() {
     without_pose[5].pose = None;
     for rows in [rows, without_pose] {
         let name = Path::new("frames.csv");
-        let written = parse_openface(openface_bytes(&rows).unwrap(), name).unwrap();
+        let written = parse_openface(openface_bytes(&rows), name).unwrap();
         let made = OpenFaceFile::from_rows(name, &rows);
         assert_eq!(made, written);
         assert_eq!(made.skipped, 1);
@@ -139,6 +139,13 @@ fn bad_files_name_file_line_and_column() {
     let e = error(&v22().replace("3,0,0.067,0.97,1,1.5", "3,0,0.067,0.97,1,abc"));
     assert!(
         e.contains("fixture.csv:4") && e.contains("pose_Tx") && e.contains("abc"),
+        "{e}"
+    );
+
+    let short = v22().replace("3,0,0.067,0.97,1,1.5,", "3,0,0.067,0.97,1,");
+    let e = error(&short);
+    assert!(
+        e.contains("fixture.csv:4") && e.contains("27 cells") && e.contains("28 columns"),
         "{e}"
     );
 

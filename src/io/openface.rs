@@ -1,5 +1,5 @@
 //! OpenFace 2.x CSV files (FeatureExtraction, FaceLandmarkVidMulti, FaceLandmarkImg), read
-//! and written with polars. Layout facts in `shared/facs-facts.md` (c):
+//! with the `csv` crate and written as OpenFace writes them. Layout facts in `shared/facs-facts.md` (c):
 //!
 //! - separators `,` (2.2) or `, ` (2.0/2.1, header names then carry a leading space);
 //! - sequence files start `frame[, face_id], timestamp, confidence, success`, image files
@@ -11,10 +11,7 @@
 //! Rows with `success = 0` are skipped and counted. Every error names the file, and where it
 //! applies the line and column.
 
-use std::io::Cursor;
 use std::path::{Path, PathBuf};
-
-use polars::prelude::*;
 
 use crate::observe::{AU_COUNT, AU_NAMES, LANDMARK_COUNT};
 use crate::sim::geom::V3;
@@ -104,8 +101,13 @@ pub enum OpenFaceError {
         line: usize,
         column: String,
     },
-    #[error("{path}: {cause}")]
-    Polars { path: PathBuf, cause: PolarsError },
+    #[error("{path}:{line}: {found} cells, but the header names {expected} columns")]
+    Cells {
+        path: PathBuf,
+        line: usize,
+        found: usize,
+        expected: usize,
+    },
 }
 
 fn pose_columns() -> [&'static str; 6] {
@@ -211,22 +213,21 @@ fn header_layout(bytes: Vec<u8>, path: &Path) -> Result<(Layout, Vec<u8>), OpenF
     Ok((layout, bytes))
 }
 
-/// A column's name and its cells (`None`: not a number).
-type NamedColumn = (String, Vec<Option<f64>>);
+/// The columns a parse uses, in order, and each used line's number and values.
+struct Cells {
+    names: Vec<String>,
+    rows: Vec<(usize, Vec<f64>)>,
+}
 
-/// The columns a parse uses, each read as numbers, in the order of `wanted`: a cell that is
-/// not a number fails with its line, column and text.
-fn read_columns(
-    bytes: &[u8],
-    path: &Path,
-    layout: &Layout,
-) -> Result<Vec<NamedColumn>, OpenFaceError> {
-    let p = || path.to_path_buf();
+/// The columns a parse uses, each read as numbers, and each row's line in the file: a cell
+/// that is not a number fails with its line, column and text, a line with more or fewer
+/// cells than the header with its line. Lines are parsed side by side; the error reported
+/// is the first in the file, whatever the threads.
+fn read_cells(bytes: &[u8], path: &Path, layout: &Layout) -> Result<Cells, OpenFaceError> {
+    use rayon::prelude::*;
     let (columns, image_mode) = (&layout.columns, layout.image_mode);
     let has = |name: &str| columns.iter().any(|c| c == name);
-    // The columns we use, all read as Float64; cells that do not parse become null and are
-    // reported below with their line and text.
-    let mut wanted: Vec<String> = vec![if image_mode { "face" } else { "frame" }.to_string()];
+    let mut names: Vec<String> = vec![if image_mode { "face" } else { "frame" }.to_string()];
     for (flag, name) in [
         (layout.face_id, "face_id"),
         (layout.timestamp, "timestamp"),
@@ -234,111 +235,98 @@ fn read_columns(
         (has("success"), "success"),
     ] {
         if flag {
-            wanted.push(name.to_string());
+            names.push(name.to_string());
         }
     }
-    wanted.extend((0..AU_COUNT).map(au_column));
+    names.extend((0..AU_COUNT).map(au_column));
     if layout.pose {
-        wanted.extend(pose_columns().iter().map(|s| s.to_string()));
+        names.extend(pose_columns().iter().map(|s| s.to_string()));
     }
     if layout.landmarks_2d {
-        wanted.extend(landmark_names(&["x", "y"]));
+        names.extend(landmark_names(&["x", "y"]));
     }
     if layout.landmarks_3d {
-        wanted.extend(landmark_names(&["X", "Y", "Z"]));
+        names.extend(landmark_names(&["X", "Y", "Z"]));
     }
-    let schema: Schema = columns
-        .iter()
-        .map(|c| {
-            let dtype = if wanted.contains(c) {
-                DataType::Float64
-            } else {
-                DataType::String
-            };
-            Field::new(c.as_str().into(), dtype)
-        })
+    // Where each of the file's columns goes among `names`.
+    let mut slot: Vec<Option<usize>> = vec![None; columns.len()];
+    for (k, name) in names.iter().enumerate() {
+        let i = columns
+            .iter()
+            .position(|c| c == name)
+            .expect("used columns are in the header");
+        slot[i] = Some(k);
+    }
+    // OpenFace writes no quotes, so a line's cells are its text between commas. Lines are
+    // counted from 1 (the header); empty lines are skipped.
+    let lines: Vec<(usize, &[u8])> = bytes
+        .split(|&b| b == b'\n')
+        .enumerate()
+        .skip(1)
+        .map(|(n, text)| (n + 1, text.strip_suffix(b"\r").unwrap_or(text)))
+        .filter(|(_, text)| !text.is_empty())
         .collect();
-    let df = CsvReadOptions::default()
-        .with_has_header(true)
-        .with_schema(Some(Arc::new(schema)))
-        .with_columns(Some(wanted.iter().map(|s| s.as_str().into()).collect()))
-        .with_ignore_errors(true)
-        .with_parse_options(CsvParseOptions::default().with_truncate_ragged_lines(false))
-        .into_reader_with_file_handle(Cursor::new(bytes))
-        .finish()
-        .map_err(|cause| OpenFaceError::Polars { path: p(), cause })?;
-
-    let column = |name: &str| -> Result<Vec<Option<f64>>, OpenFaceError> {
-        let series = df
-            .column(name)
-            .map_err(|cause| OpenFaceError::Polars { path: p(), cause })?;
-        let values = series
-            .f64()
-            .map_err(|cause| OpenFaceError::Polars { path: p(), cause })?;
-        Ok(values
-            .downcast_iter()
-            .flat_map(|arr| arr.iter().map(|v| v.copied()))
-            .collect())
-    };
-    // Line text for error messages (only built when needed).
-    let cell_text = |row: usize, name: &str| -> String {
-        let index = columns.iter().position(|c| c == name).unwrap_or(0);
-        String::from_utf8_lossy(bytes)
-            .lines()
-            .nth(row + 1)
-            .and_then(|l| l.split(',').nth(index))
-            .unwrap_or("")
-            .trim()
-            .to_string()
-    };
-    let mut data: Vec<NamedColumn> = Vec::with_capacity(wanted.len());
-    for name in &wanted {
-        let values = column(name)?;
-        if let Some(row) = values.iter().position(|v| v.is_none()) {
-            return Err(OpenFaceError::NotNumber {
-                path: p(),
-                line: row + 2,
-                column: name.clone(),
-                cell: cell_text(row, name),
+    let parse_line = |&(line, text): &(usize, &[u8])| -> Result<(usize, Vec<f64>), OpenFaceError> {
+        let mut values = vec![0.0; names.len()];
+        let mut found = 0;
+        for (i, cell) in text.split(|&b| b == b',').enumerate() {
+            found += 1;
+            let Some(k) = slot.get(i).copied().flatten() else {
+                continue;
+            };
+            let text = String::from_utf8_lossy(cell);
+            values[k] = text.trim().parse().map_err(|_| OpenFaceError::NotNumber {
+                path: path.to_path_buf(),
+                line,
+                column: names[k].clone(),
+                cell: text.trim().to_string(),
+            })?;
+        }
+        if found != columns.len() {
+            return Err(OpenFaceError::Cells {
+                path: path.to_path_buf(),
+                line,
+                found,
+                expected: columns.len(),
             });
         }
-        data.push((name.clone(), values));
-    }
-    Ok(data)
+        Ok((line, values))
+    };
+    let parsed: Vec<Result<(usize, Vec<f64>), OpenFaceError>> =
+        lines.par_iter().map(parse_line).collect();
+    let rows = parsed.into_iter().collect::<Result<Vec<_>, _>>()?;
+    Ok(Cells { names, rows })
 }
 
 pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenFaceError> {
     let (layout, bytes) = header_layout(bytes, path)?;
-    let data = read_columns(&bytes, path, &layout)?;
+    let Cells { names, rows: cells } = read_cells(&bytes, path, &layout)?;
     let p = || path.to_path_buf();
-    let n = data[0].1.len();
-    let get = |name: &str, row: usize| -> Option<f64> {
-        data.iter()
-            .find(|(c, _)| c == name)
-            .and_then(|(_, v)| v[row])
-    };
-    let index_of = |name: &str| data.iter().position(|(c, _)| c == name);
+    let index_of = |name: &str| names.iter().position(|c| c == name);
     let au_idx: Vec<usize> = (0..AU_COUNT)
         .map(|k| index_of(&au_column(k)).expect("AU columns are read"))
         .collect();
     let success_idx = index_of("success");
-    let mut rows = Vec::with_capacity(n);
+    let (face_id_idx, timestamp_idx, confidence_idx) = (
+        index_of("face_id"),
+        index_of("timestamp"),
+        index_of("confidence"),
+    );
+    let mut rows = Vec::with_capacity(cells.len());
     let mut skipped = 0;
-    for r in 0..n {
-        if let Some(s) = success_idx {
-            if data[s].1[r] == Some(0.0) {
-                skipped += 1;
-                continue;
-            }
+    for (line, data) in &cells {
+        let line = *line;
+        if success_idx.is_some_and(|s| data[s] == 0.0) {
+            skipped += 1;
+            continue;
         }
-        let line = r + 2;
         let value = |i: usize| -> Result<f64, OpenFaceError> {
-            let v = data[i].1[r].expect("nulls rejected above");
+            let v = data[i];
             if v.is_nan() {
                 return Err(OpenFaceError::NaN {
                     path: p(),
                     line,
-                    column: data[i].0.clone(),
+                    column: names[i].clone(),
                 });
             }
             Ok(v)
@@ -384,9 +372,9 @@ pub fn parse_openface(bytes: Vec<u8>, path: &Path) -> Result<OpenFaceFile, OpenF
         rows.push(FaceRow {
             line,
             frame,
-            face_id: get("face_id", r).map(|v| v as i64),
-            timestamp: get("timestamp", r),
-            confidence: get("confidence", r).unwrap_or(1.0),
+            face_id: face_id_idx.map(|i| data[i] as i64),
+            timestamp: timestamp_idx.map(|i| data[i]),
+            confidence: confidence_idx.map_or(1.0, |i| data[i]),
             success: true,
             aus,
             pose,
@@ -501,16 +489,17 @@ impl OpenFaceFile {
 /// 3D landmarks if every row has them, then the 17 `AUxx_r` columns, with OpenFace's decimals (AUs 2, pose
 /// rotation 3, translation and landmarks 1, timestamp 3, confidence 2). The write is atomic.
 pub fn write_openface(path: &Path, rows: &[FaceRow]) -> anyhow::Result<()> {
-    let bytes = openface_bytes(rows)?;
-    Ok(crate::io::atomic::write_atomic(path, &bytes)?)
+    Ok(crate::io::atomic::write_atomic(
+        path,
+        &openface_bytes(rows),
+    )?)
 }
 
 /// The bytes `write_openface` writes.
-pub fn openface_bytes(rows: &[FaceRow]) -> anyhow::Result<Vec<u8>> {
-    let mut cols: Vec<Column> = Vec::new();
+pub fn openface_bytes(rows: &[FaceRow]) -> Vec<u8> {
+    let mut cols: Vec<(String, Vec<String>)> = Vec::new();
     let mut text = |name: &str, f: &dyn Fn(&FaceRow) -> String| {
-        let values: Vec<String> = rows.iter().map(f).collect();
-        cols.push(Column::new(name.into(), values));
+        cols.push((name.to_string(), rows.iter().map(f).collect()));
     };
     text("frame", &|r| r.frame.to_string());
     text("face_id", &|r| r.face_id.unwrap_or(0).to_string());
@@ -558,13 +547,22 @@ pub fn openface_bytes(rows: &[FaceRow]) -> anyhow::Result<Vec<u8>> {
     for k in 0..AU_COUNT {
         text(&au_column(k), &|r| format!("{:.*}", AU_DECIMALS, r.aus[k]));
     }
-    let mut df = DataFrame::new(rows.len(), cols)?;
+    // No cell holds a comma, a quote or a line break, so none is quoted.
     let mut out = Vec::new();
-    CsvWriter::new(&mut out)
-        .include_header(true)
-        .with_quote_style(QuoteStyle::Never)
-        .finish(&mut df)?;
-    Ok(out)
+    let mut line = |cells: &mut dyn Iterator<Item = &str>| {
+        for (i, cell) in cells.enumerate() {
+            if i > 0 {
+                out.push(b',');
+            }
+            out.extend_from_slice(cell.as_bytes());
+        }
+        out.push(b'\n');
+    };
+    line(&mut cols.iter().map(|(name, _)| name.as_str()));
+    for r in 0..rows.len() {
+        line(&mut cols.iter().map(|(_, values)| values[r].as_str()));
+    }
+    out
 }
 
 /// The 714 column names of a full OpenFace 2.2 FeatureExtraction file, in order.

@@ -570,7 +570,7 @@ pub fn landmark_files(
         .iter()
         .map(|p| image::imageops::crop_imm(p, crop[0], crop[1], crop[2], crop[3]).to_image())
         .collect();
-    let bytes = crate::io::openface::openface_bytes(&rows)?;
+    let bytes = crate::io::openface::openface_bytes(&rows);
     let preview = if pictures.len() == 1 {
         ("landmarks.png", png_bytes(&pictures[0])?)
     } else {
