@@ -29,6 +29,14 @@ pub struct JudgeFrames {
     mesh: Vec<Option<Blendshapes>>,
 }
 
+/// The judge's readings of one frame ([`JudgeFrames::reading`]).
+#[derive(Clone, Debug)]
+pub struct FrameReading {
+    mesh: Option<Blendshapes>,
+    /// `Some` on the frames whose render is read.
+    render: Option<Option<Blendshapes>>,
+}
+
 /// What the judge found: the files' text and the summary lines.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Fidelity {
@@ -52,18 +60,31 @@ impl JudgeFrames {
         })
     }
 
-    /// Reads frame `i` (its solved, posed face).
-    pub fn read(&mut self, model: &FaceModel, state: &State, i: usize) -> Result<()> {
-        self.mesh[i] = self
+    /// The judge's readings of frame `i` (its solved, posed face): the mesh's, and the
+    /// render's on every `render_every`th frame. A function of the frame alone, so frames are
+    /// read side by side and [`JudgeFrames::store`]d in order.
+    pub fn reading(&self, model: &FaceModel, state: &State, i: usize) -> Result<FrameReading> {
+        let mesh = self
             .judge
             .face(model, state, &self.options, Reading::Mesh)?;
-        if i % self.render_every == 0 {
+        let render = if i % self.render_every == 0 {
+            Some(
+                self.judge
+                    .face(model, state, &self.options, Reading::Render)?,
+            )
+        } else {
+            None
+        };
+        Ok(FrameReading { mesh, render })
+    }
+
+    /// Keeps frame `i`'s readings.
+    pub fn store(&mut self, i: usize, reading: FrameReading) {
+        self.mesh[i] = reading.mesh;
+        if let Some(render) = reading.render {
             self.rendered[i] = true;
-            self.render[i] = self
-                .judge
-                .face(model, state, &self.options, Reading::Render)?;
+            self.render[i] = render;
         }
-        Ok(())
     }
 
     /// The files and summary, with the input's scores per frame where the input is a

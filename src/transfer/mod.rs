@@ -229,11 +229,73 @@ pub fn transfer_frames(file: &OpenFaceFile, opts: &TransferOptions) -> Result<Tr
         ..RenderOptions::default()
     };
     let mut judged = opts.judge.then(|| JudgeFrames::new(n, still)).transpose()?;
+    // What a solved frame gives: its AUs as the observer reads them, the judge's readings, a
+    // still and a GIF frame where asked. A function of the frame's face alone, so the frames
+    // of a block are made side by side (rayon) and kept in order.
+    let made = |i: usize, state: &crate::sim::State| -> Result<Made> {
+        let aus = observer
+            .observe(&landmarks(state.surface(model.vertex_count())))?
+            .aus;
+        let frame = file.rows[i].frame;
+        let posed;
+        let state = match &head {
+            Some(h) => {
+                let motion = face_motion(h.pose[i], h.offset[i]);
+                posed = posed_face(state, &motion);
+                &posed
+            }
+            None => state,
+        };
+        let picture = opts
+            .pictures
+            .as_ref()
+            .and_then(|p| p.get(usize::try_from(frame - 1).ok()?));
+        let beside = |face: RgbImage| match picture {
+            Some(p) => side_by_side(p, &face),
+            None => face,
+        };
+        let reading = match &judged {
+            Some(j) => Some(j.reading(&model, state, i)?),
+            None => None,
+        };
+        let still = wanted
+            .contains(&frame)
+            .then(|| (frame, beside(render(&model, state, &still))));
+        let gif = (n > 1 && i % gif_every == 0).then(|| beside(render(&model, state, &cell)));
+        Ok(Made {
+            aus,
+            reading,
+            still,
+            gif,
+        })
+    };
     let mut transferred = Vec::with_capacity(n);
     let mut stills: Vec<(i64, RgbImage)> = Vec::new();
     let mut frames: Vec<RgbImage> = Vec::new();
-    let mut ws = Workspace::new(&model)?;
     let mut solved = vec![true; n];
+    let mut readings = Vec::new();
+    // The solved frames not yet made, at most a block of them.
+    let mut pending: Vec<(usize, Option<crate::sim::State>)> = Vec::new();
+    let mut flush = |pending: &mut Vec<(usize, Option<crate::sim::State>)>| -> Result<()> {
+        use rayon::prelude::*;
+        let block: Vec<Option<Made>> = pending
+            .par_iter()
+            .map(|(i, state)| state.as_ref().map(|s| made(*i, s)).transpose())
+            .collect::<Result<_>>()?;
+        for ((i, _), frame) in pending.drain(..).zip(block) {
+            let Some(frame) = frame else {
+                solved[i] = false;
+                transferred.push([0.0; AU_COUNT]);
+                continue;
+            };
+            transferred.push(frame.aus);
+            readings.extend(frame.reading.map(|r| (i, r)));
+            stills.extend(frame.still);
+            frames.extend(frame.gif);
+        }
+        Ok(())
+    };
+    let mut ws = Workspace::new(&model)?;
     let failures = solve_clip_tolerant(
         &acts,
         |i, a, previous: Option<&crate::sim::State>, ws| match previous {
@@ -247,44 +309,20 @@ pub fn transfer_frames(file: &OpenFaceFile, opts: &TransferOptions) -> Result<Tr
         },
         &mut ws,
         |i, state| {
-            let Some(state) = state else {
-                solved[i] = false;
-                transferred.push([0.0; AU_COUNT]);
-                return Ok(());
-            };
-            let o = observer.observe(&landmarks(state.surface(model.vertex_count())))?;
-            transferred.push(o.aus);
-            let frame = file.rows[i].frame;
-            let posed;
-            let state = match &head {
-                Some(h) => {
-                    let motion = face_motion(h.pose[i], h.offset[i]);
-                    posed = posed_face(state, &motion);
-                    &posed
-                }
-                None => state,
-            };
-            let picture = opts
-                .pictures
-                .as_ref()
-                .and_then(|p| p.get(usize::try_from(frame - 1).ok()?));
-            let beside = |face: RgbImage| match picture {
-                Some(p) => side_by_side(p, &face),
-                None => face,
-            };
-            if let Some(j) = judged.as_mut() {
-                j.read(&model, state, i)?;
-            }
-            if wanted.contains(&frame) {
-                stills.push((frame, beside(render(&model, state, &still))));
-            }
-            if n > 1 && i % gif_every == 0 {
-                frames.push(beside(render(&model, state, &cell)));
+            pending.push((i, state.cloned()));
+            if pending.len() == MADE_BLOCK {
+                flush(&mut pending)?;
             }
             Ok(())
         },
     )
     .with_context(|| format!("{name}: transferring"))?;
+    flush(&mut pending).with_context(|| format!("{name}: transferring"))?;
+    if let Some(j) = judged.as_mut() {
+        for (i, reading) in readings {
+            j.store(i, reading);
+        }
+    }
     let unsolved: Vec<String> = failures
         .iter()
         .map(|(i, why)| format!("frame {}: {why}", file.rows[*i].frame))
@@ -320,6 +358,18 @@ pub fn transfer_frames(file: &OpenFaceFile, opts: &TransferOptions) -> Result<Tr
         fidelity: outputs.fidelity,
         written: outputs.written,
     })
+}
+
+/// Solved frames made into AUs, readings and pictures at a time (side by side): enough to
+/// keep both cores busy, few enough faces held at once for a long file.
+const MADE_BLOCK: usize = 64;
+
+/// What one solved frame of a transfer gives (`transfer_frames`).
+struct Made {
+    aus: [f64; AU_COUNT],
+    reading: Option<fidelity::FrameReading>,
+    still: Option<(i64, RgbImage)>,
+    gif: Option<RgbImage>,
 }
 
 /// Each frame's activations and, where a fit already solved it, its face: `opts.fitted`'s,
