@@ -259,48 +259,68 @@ pub fn landmark_frames(
     fps: f64,
     name: &str,
 ) -> Result<Landmarked> {
+    use rayon::prelude::*;
     let rest = model.rest_state();
     let rest = rest.surface(model.vertex_count());
-    let mut found = Vec::with_capacity(frames.len());
     let mut warnings = Vec::new();
-    let mut previous: Option<FaceMesh> = None;
+    // A frame's mesh found by detection: the largest face, and how many there were.
+    let detect = |frame: &RgbFrame| -> Result<(Option<FaceMesh>, usize)> {
+        let faces = landmarker.faces(frame)?;
+        let n = faces.len();
+        Ok((faces.into_iter().next().map(|f| f.mesh), n))
+    };
+    let meshes: Vec<(Option<FaceMesh>, usize)> = if kind == InputKind::Folder {
+        // A folder holds separate pictures: each is detected (MediaPipe's static mode), side
+        // by side.
+        let detected: Vec<Result<_>> = frames.par_iter().map(detect).collect();
+        detected.into_iter().collect::<Result<_>>()?
+    } else {
+        let mut meshes = Vec::with_capacity(frames.len());
+        let mut previous: Option<FaceMesh> = None;
+        for frame in &frames {
+            let tracked = match &previous {
+                Some(p) => landmarker.track(frame, p)?,
+                None => None,
+            };
+            let found = match tracked {
+                Some(m) => (Some(m), 1),
+                None => detect(frame)?,
+            };
+            previous = found.0.clone();
+            meshes.push(found);
+        }
+        meshes
+    };
     let mut missing = Vec::new();
-    for (i, frame) in frames.iter().enumerate() {
-        // A folder holds separate pictures: each is detected (MediaPipe's static mode).
-        let tracked = match &previous {
-            Some(p) if kind != InputKind::Folder => landmarker.track(frame, p)?,
-            _ => None,
-        };
-        let (mesh, faces_found) = match tracked {
-            Some(m) => (Some(m), 1),
-            None => {
-                let faces = landmarker.faces(frame)?;
-                if faces.len() > 1 {
-                    warnings.push(format!(
-                        "{name}: frame {i}: {} faces, took the largest",
-                        faces.len()
-                    ));
-                }
-                let n = faces.len();
-                (faces.into_iter().next().map(|f| f.mesh), n)
-            }
-        };
+    for (i, (mesh, faces_found)) in meshes.iter().enumerate() {
+        if *faces_found > 1 {
+            warnings.push(format!(
+                "{name}: frame {i}: {faces_found} faces, took the largest"
+            ));
+        }
         if mesh.is_none() {
             missing.push(i);
         }
-        let metric = mesh.as_ref().map(|m| metric::fit(&m.points, rest));
-        let blendshapes = match &mesh {
-            Some(m) => landmarker.blendshapes(m)?,
-            None => None,
-        };
-        previous = mesh.clone();
-        found.push(LandmarkedFrame {
-            mesh,
-            metric,
-            blendshapes,
-            faces_found,
-        });
     }
+    // Each found mesh's metric face and blendshapes are its own: made side by side.
+    let found: Vec<Result<LandmarkedFrame>> = meshes
+        .into_par_iter()
+        .map(|(mesh, faces_found)| -> Result<LandmarkedFrame> {
+            let metric = mesh.as_ref().map(|m| metric::fit(&m.points, rest));
+            let blendshapes = match &mesh {
+                Some(m) => landmarker.blendshapes(m)?,
+                None => None,
+            };
+            Ok(LandmarkedFrame {
+                mesh,
+                metric,
+                blendshapes,
+                faces_found,
+            })
+        })
+        .collect();
+    // The first error in frame order, whatever the threads.
+    let found = found.into_iter().collect::<Result<Vec<_>>>()?;
     if !missing.is_empty() {
         let list: Vec<String> = missing.iter().take(10).map(|i| i.to_string()).collect();
         warnings.push(format!(
