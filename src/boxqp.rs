@@ -206,7 +206,12 @@ impl Bound {
 /// Norm of the proximal gradient at unit step, `|prox(a - grad) - a|`: zero exactly at the
 /// bound's minimum (for the box, the projected gradient).
 pub fn stationarity(qp: &BoxQp, bound: Bound, a: &[f64]) -> f64 {
-    qp.gradient(a)
+    stationarity_at(&qp.gradient(a), bound, a)
+}
+
+/// [`stationarity`] from the gradient at `a`.
+fn stationarity_at(gradient: &[f64], bound: Bound, a: &[f64]) -> f64 {
+    gradient
         .iter()
         .zip(a)
         .map(|(&g, &x)| {
@@ -298,21 +303,25 @@ pub fn projected_newton(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usi
     const ARMIJO: f64 = 1e-4;
     let n = qp.n;
     let scale = qp.gradient_scale();
-    let objective = |a: &[f64]| -> f64 {
-        let ha = qp.hv(a);
+    // The objective and the gradient at a point share its `H a`, computed once per point
+    // (the arithmetic of `BoxQp::gradient` and `stationarity`, so the same bits).
+    let objective = |a: &[f64], ha: &[f64]| -> f64 {
         a.iter()
-            .zip(&ha)
+            .zip(ha)
             .zip(&qp.g)
             .map(|((x, h), g)| x * (0.5 * h - g))
             .sum()
     };
+    let gradient =
+        |ha: Vec<f64>| -> Vec<f64> { ha.into_iter().zip(&qp.g).map(|(h, g)| h - g).collect() };
     let mut a: Vec<f64> = start.iter().map(|x| x.clamp(0.0, 1.0)).collect();
-    let mut f = objective(&a);
+    let ha = qp.hv(&a);
+    let mut f = objective(&a, &ha);
+    let mut g = gradient(ha);
     let mut iterations = 0;
-    let mut gradient_norm = stationarity(qp, Bound::Box, &a);
+    let mut gradient_norm = stationarity_at(&g, Bound::Box, &a);
     while iterations < max_iterations && gradient_norm > tol * scale {
         iterations += 1;
-        let g = qp.gradient(&a);
         let eps = EPSILON.min(gradient_norm);
         let binding: Vec<bool> = (0..n)
             .map(|i| (a[i] <= eps && g[i] > 0.0) || (a[i] >= 1.0 - eps && g[i] < 0.0))
@@ -349,18 +358,20 @@ pub fn projected_newton(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usi
                     }
                 })
                 .sum();
-            let ft = objective(&trial);
+            let ht = qp.hv(&trial);
+            let ft = objective(&trial, &ht);
             // `decrease` >= 0: the free step is a Newton step of a positive definite block
             // (or a scaled gradient step), and the bound ones move against the gradient.
             if f - ft >= ARMIJO * decrease {
                 accepted = true;
                 a = trial;
                 f = ft;
+                g = gradient(ht);
                 break;
             }
             t *= 0.5;
         }
-        gradient_norm = stationarity(qp, Bound::Box, &a);
+        gradient_norm = stationarity_at(&g, Bound::Box, &a);
         if !accepted {
             break;
         }
