@@ -97,10 +97,10 @@ fn crate_paths(code: &str) -> BTreeSet<String> {
     let mut found = BTreeSet::new();
     let mut rest = code;
     while let Some(at) = rest.find("crate::") {
-        let before = rest[..at].chars().next_back();
+        let starts = path_starts(&rest[..at]);
         rest = &rest[at + "crate::".len()..];
         // `$crate::` and `facelab_crate::` are not this crate's paths.
-        if before.is_some_and(|c| c == '$' || c == '_' || c.is_alphanumeric()) {
+        if !starts {
             continue;
         }
         if let Some(group) = rest.strip_prefix('{') {
@@ -230,14 +230,20 @@ fn used(src: &Path) -> BTreeSet<(String, String)> {
     edges
 }
 
+/// Whether a path segment right after `before` is the path's first: not the tail of a
+/// longer name (`facelab_crate`, `$crate`) nor a later segment (`codecs::gif`).
+fn path_starts(before: &str) -> bool {
+    !before
+        .chars()
+        .next_back()
+        .is_some_and(|c| c == '$' || c == ':' || c == '_' || c.is_alphanumeric())
+}
+
 /// Whether `code` names the external crate `krate` as a path's first segment (`gif::Frame`,
 /// not `image::codecs::gif::GifDecoder`).
 fn names_crate(code: &str, krate: &str) -> bool {
-    let path = format!("{krate}::");
-    code.match_indices(&path).any(|(at, _)| {
-        let before = code[..at].chars().next_back();
-        !before.is_some_and(|c| c == ':' || c == '_' || c.is_alphanumeric())
-    })
+    code.match_indices(&format!("{krate}::"))
+        .any(|(at, _)| path_starts(&code[..at]))
 }
 
 /// Every allowed import no code makes, as "module -> what": a rule the code does not need

@@ -1,5 +1,6 @@
 //! OpenFace 2.x CSV files (FeatureExtraction, FaceLandmarkVidMulti, FaceLandmarkImg), read
-//! with the `csv` crate and written as OpenFace writes them. Layout facts in `shared/facs-facts.md` (c):
+//! and written as OpenFace writes them: no quotes, so a line's cells are the text between its
+//! commas. Layout facts in `shared/facs-facts.md` (c):
 //!
 //! - separators `,` (2.2) or `, ` (2.0/2.1, header names then carry a leading space);
 //! - sequence files start `frame[, face_id], timestamp, confidence, success`, image files
