@@ -1,8 +1,9 @@
 //! The equilibrium fit (the activations and strains that hold a head pose at rest, a box
-//! QP solved by projected Newton) and the teacher voluntary controller built on it.
+//! QP solved by the primal-dual active-set method) and the teacher voluntary controller built
+//! on it.
 
 use super::*;
-use crate::boxqp::{projected_newton, BoxQp};
+use crate::boxqp::{active_set, BoxQp};
 
 /// The fit's residual weights: per N m of unbalanced joint torque and per radian of skull
 /// orientation error (the posture prior has `posture_weight`, the effort `effort_weight`).
@@ -126,7 +127,7 @@ impl Neck {
                 qp.h[i * qp.n + i] += lambda + mu;
                 qp.g[i] += mu * a[i];
             }
-            let proposal = projected_newton(&qp, &a, 1e-10, 200).a;
+            let proposal = active_set(&qp, &a, 1e-10, 200).a;
             let rest: Vec<f64> = (0..ROWS)
                 .map(|row| {
                     d[row]
