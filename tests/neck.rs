@@ -318,10 +318,11 @@ fn cohort_poses_transfer_through_the_neck_a_still_settles_and_a_clip_follows() {
     assert!(e.iter().all(|x| x.is_finite()));
     // The still settles near its pose; the clip starts on its first pose (from upright it
     // would be 8 deg off) and lags behind a turn of 60 deg/s by at most a few degrees, as the
-    // controller lags on the head-neck experiment's sequences.
+    // controller lags on the head-neck experiment's sequences (5-8 deg at most there): a
+    // tenth of a second behind is 6 deg.
     assert!(e[0] < 2.0, "still: {} deg", e[0]);
     assert!(e[1] < 1.0, "the clip starts settled: {} deg", e[1]);
-    assert!(e[1..].iter().all(|&x| x < 5.0), "clip: {:?}", &e[1..]);
+    assert!(e[1..].iter().all(|&x| x < 6.0), "clip: {:?}", &e[1..]);
     let rows = summarize(&reference, &e);
     assert_eq!(rows.len(), 2);
     assert_eq!((rows[0].cohort, rows[0].frames), (CohortKind::Images, 1));
