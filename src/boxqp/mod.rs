@@ -411,15 +411,8 @@ pub fn active_set(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usize) ->
     }
     let n = qp.n;
     let scale = qp.gradient_scale();
-    let gradient = |a: &[f64]| -> Vec<f64> {
-        qp.hv(a)
-            .into_iter()
-            .zip(&qp.g)
-            .map(|(h, g)| h - g)
-            .collect()
-    };
     let mut a: Vec<f64> = start.iter().map(|x| x.clamp(0.0, 1.0)).collect();
-    let mut r = gradient(&a);
+    let mut r = qp.gradient(&a);
     let mut sets: Vec<Set> = Vec::new();
     let mut iterations = 0;
     let mut settled = false;
@@ -469,12 +462,12 @@ pub fn active_set(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usize) ->
                 a[i] = rhs[(row, 0)];
             }
         }
-        r = gradient(&a);
+        r = qp.gradient(&a);
     }
     // Settled sets leave the free variables in the box up to rounding.
     if a.iter().any(|x| !(0.0..=1.0).contains(x)) {
         a.iter_mut().for_each(|x| *x = x.clamp(0.0, 1.0));
-        r = gradient(&a);
+        r = qp.gradient(&a);
     }
     let gradient_norm = stationarity_at(&r, Bound::Box, &a);
     if settled && gradient_norm <= tol * scale {
