@@ -115,11 +115,12 @@ impl BoxQp {
 
     /// Gradient `H a - g`.
     pub fn gradient(&self, a: &[f64]) -> Vec<f64> {
-        self.hv(a)
-            .into_iter()
-            .zip(&self.g)
-            .map(|(h, g)| h - g)
-            .collect()
+        self.gradient_from(self.hv(a))
+    }
+
+    /// Gradient `H a - g` from `H a` (`ha`), for a solver that also needs `H a` itself.
+    fn gradient_from(&self, ha: Vec<f64>) -> Vec<f64> {
+        ha.into_iter().zip(&self.g).map(|(h, g)| h - g).collect()
     }
 
     /// `|M a - d|^2`.
@@ -308,7 +309,7 @@ pub fn projected_newton(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usi
     let n = qp.n;
     let scale = qp.gradient_scale();
     // The objective and the gradient at a point share its `H a`, computed once per point
-    // (the arithmetic of `BoxQp::gradient` and `stationarity`, so the same bits).
+    // (the gradient through `BoxQp::gradient_from`, so the same bits as `gradient`).
     let objective = |a: &[f64], ha: &[f64]| -> f64 {
         a.iter()
             .zip(ha)
@@ -316,12 +317,10 @@ pub fn projected_newton(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usi
             .map(|((x, h), g)| x * (0.5 * h - g))
             .sum()
     };
-    let gradient =
-        |ha: Vec<f64>| -> Vec<f64> { ha.into_iter().zip(&qp.g).map(|(h, g)| h - g).collect() };
     let mut a: Vec<f64> = start.iter().map(|x| x.clamp(0.0, 1.0)).collect();
     let ha = qp.hv(&a);
     let mut f = objective(&a, &ha);
-    let mut g = gradient(ha);
+    let mut g = qp.gradient_from(ha);
     let mut iterations = 0;
     let mut gradient_norm = stationarity_at(&g, Bound::Box, &a);
     while iterations < max_iterations && gradient_norm > tol * scale {
@@ -370,7 +369,7 @@ pub fn projected_newton(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usi
                 accepted = true;
                 a = trial;
                 f = ft;
-                g = gradient(ht);
+                g = qp.gradient_from(ht);
                 break;
             }
             t *= 0.5;
@@ -411,7 +410,8 @@ pub fn active_set(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usize) ->
     }
     let n = qp.n;
     let scale = qp.gradient_scale();
-    let mut a: Vec<f64> = start.iter().map(|x| x.clamp(0.0, 1.0)).collect();
+    let mut a = start.to_vec();
+    clamp01(&mut a);
     let mut r = qp.gradient(&a);
     let mut sets: Vec<Set> = Vec::new();
     let mut iterations = 0;
@@ -466,7 +466,7 @@ pub fn active_set(qp: &BoxQp, start: &[f64], tol: f64, max_iterations: usize) ->
     }
     // Settled sets leave the free variables in the box up to rounding.
     if a.iter().any(|x| !(0.0..=1.0).contains(x)) {
-        a.iter_mut().for_each(|x| *x = x.clamp(0.0, 1.0));
+        clamp01(&mut a);
         r = qp.gradient(&a);
     }
     let gradient_norm = stationarity_at(&r, Bound::Box, &a);

@@ -80,6 +80,14 @@ fn random_qps() -> Vec<BoxQp> {
         .collect()
 }
 
+/// The largest difference between two answers' activations.
+fn largest_difference(x: &[f64], y: &[f64]) -> f64 {
+    x.iter()
+        .zip(y)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
 /// The random QPs: projected Newton meets FISTA's stationarity test at the same minimum, in
 /// far fewer iterations.
 #[test]
@@ -91,12 +99,7 @@ fn projected_newton_finds_the_minimum_projected_gradient_finds() {
         assert!(fista.converged && newton.converged, "trial {trial}");
         let bound = newton.a.iter().filter(|&&x| x == 0.0 || x == 1.0).count();
         assert!(bound > 0 && bound < n, "trial {trial}: {bound} at a bound");
-        let apart = fista
-            .a
-            .iter()
-            .zip(&newton.a)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max);
+        let apart = largest_difference(&fista.a, &newton.a);
         assert!(apart < 1e-6, "trial {trial}: {apart:.2e} apart");
         assert!(
             10 * newton.iterations < fista.iterations,
@@ -117,12 +120,7 @@ fn active_set_finds_the_minimum_projected_newton_finds() {
         for start in [0.0, 0.5] {
             let sets = active_set(&qp, &[start; 72], 1e-10, 50);
             assert!(newton.converged && sets.converged, "trial {trial}");
-            let apart = sets
-                .a
-                .iter()
-                .zip(&newton.a)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0, f64::max);
+            let apart = largest_difference(&sets.a, &newton.a);
             assert!(apart < 1e-8, "trial {trial}: {apart:.2e} apart");
             assert!(sets.a.iter().all(|x| (0.0..=1.0).contains(x)));
         }
